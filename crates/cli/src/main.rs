@@ -1,0 +1,198 @@
+//! `snell`: the command-line front end. Exit status 0 on success, 1 for bad input (a scene or
+//! mesh that cannot be read, an output that cannot be written), 2 for command-line misuse.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use snell_core::accel::{AccelKind, AccelParams};
+use snell_core::integrator::{RayStats, Whitted};
+use snell_core::render::{render, RenderSettings};
+use snell_core::with_world;
+use snell_io::scene::LoadedScene;
+
+/// The built-in default scene (`snell render` with no scene file).
+const DEFAULT_SCENE: &str = include_str!("../../../scenes/default.toml");
+
+#[derive(Parser)]
+#[command(
+    name = "snell",
+    version,
+    about = "Snell: a physically based CPU ray tracer"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene (.toml) or a bare mesh (.obj, .ply) to PNG or EXR.
+    Render(RenderArgs),
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// Scene file (.toml) or mesh (.obj, .ply). Without it, the built-in default scene.
+    scene: Option<PathBuf>,
+    /// Output image; the extension picks the format: .png (8-bit sRGB) or .exr (linear float).
+    #[arg(short, long, default_value = "snell.png")]
+    output: PathBuf,
+    /// Samples per pixel.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_048_576))]
+    spp: Option<u32>,
+    /// Image width in pixels.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    width: Option<u32>,
+    /// Image height in pixels.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    height: Option<u32>,
+    /// Random seed; the image depends only on scene, seed and sample count.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Worker threads (default: one per core). Does not change the image.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    threads: Option<u32>,
+    /// Maximum depth of the ray tree (0: camera and shadow rays only).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=1000))]
+    max_depth: Option<u32>,
+    /// Prune branches whose accumulated weight falls below this.
+    #[arg(long, value_parser = parse_attenuation)]
+    min_attenuation: Option<f32>,
+    /// Acceleration structure: default, brute, bvh-center, bvh-median, bvh-sah.
+    #[arg(long, value_parser = parse_accel)]
+    accel: Option<AccelKind>,
+}
+
+fn parse_attenuation(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("must be between 0 and 1, found {v}"))
+    }
+}
+
+fn parse_accel(s: &str) -> Result<AccelKind, String> {
+    s.parse()
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(args) => cmd_render(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn load(scene: Option<&Path>) -> Result<LoadedScene> {
+    let Some(path) = scene else {
+        return Ok(snell_io::scene::parse(
+            DEFAULT_SCENE,
+            Path::new("<built-in default scene>"),
+        )?);
+    };
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase());
+    Ok(match ext.as_deref() {
+        Some("toml") => snell_io::scene::load(path)?,
+        Some("obj") | Some("ply") => snell_io::scene::from_mesh(path)?,
+        _ => bail!(
+            "{}: unsupported scene format (expected .toml, .obj or .ply)",
+            path.display()
+        ),
+    })
+}
+
+fn cmd_render(args: RenderArgs) -> Result<()> {
+    snell_io::image_out::check_output(&args.output)?;
+    let t_load = Instant::now();
+    let loaded = load(args.scene.as_deref())?;
+    let load_s = t_load.elapsed().as_secs_f64();
+    let mut scene = loaded.scene;
+    let s = loaded.settings;
+
+    let settings = RenderSettings {
+        width: args.width.unwrap_or(s.width),
+        height: args.height.unwrap_or(s.height),
+        spp: args.spp.unwrap_or(s.spp),
+        seed: args.seed.unwrap_or(s.seed),
+        threads: args.threads.unwrap_or(0) as usize,
+        filter: s.filter,
+    };
+    let integrator = Whitted {
+        max_depth: args.max_depth.unwrap_or(s.max_depth),
+        min_attenuation: args.min_attenuation.unwrap_or(s.min_attenuation),
+    };
+    let accel = args.accel.unwrap_or(s.accel);
+    // An automatic camera is framed for the final aspect ratio.
+    if let Some(c) = loaded
+        .frame
+        .and_then(|b| snell_io::scene::auto_camera(b, settings.width, settings.height))
+    {
+        scene.camera = c;
+    }
+
+    let t_build = Instant::now();
+    let world = accel.build_world(&scene, &AccelParams::default());
+    let build_s = t_build.elapsed().as_secs_f64();
+
+    let pixels = settings.width as u64 * settings.height as u64;
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::with_draw_target(Some(pixels), ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] [{wide_bar}] {percent:>3}% ETA {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let progress = |n: u64| bar.inc(n);
+    let t_render = Instant::now();
+    let (image, stats) = with_world!(&world, w => render(w, &integrator, &settings, &progress));
+    let render_s = t_render.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+
+    snell_io::image_out::write_image(&args.output, &image)
+        .with_context(|| format!("writing {}", args.output.display()))?;
+    print_stats(&stats);
+    println!(
+        "{}: {}x{} at {} spp with {} ({} triangles): load {:.2} s, build {:.3} s, render {:.2} s, {:.2} Mrays/s",
+        args.output.display(),
+        settings.width,
+        settings.height,
+        settings.spp,
+        accel,
+        scene.triangle_count(),
+        load_s,
+        build_s,
+        render_s,
+        stats.total_rays() as f64 / render_s.max(1e-9) / 1e6
+    );
+    Ok(())
+}
+
+fn print_stats(s: &RayStats) {
+    println!("ray tree:");
+    println!("  camera rays         {:>12}", s.camera);
+    println!("  shadow rays         {:>12}", s.shadow);
+    println!("  reflection rays     {:>12}", s.reflection);
+    println!("  refraction rays     {:>12}", s.refraction);
+    println!("  pruned by depth     {:>12}", s.pruned_depth);
+    println!("  pruned by weight    {:>12}", s.pruned_attenuation);
+    println!("  total int. refl.    {:>12}", s.total_internal_reflections);
+}

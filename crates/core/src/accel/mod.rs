@@ -1,0 +1,198 @@
+//! Acceleration structures, kept apart from the scene.
+//!
+//! An accelerator is built over a list of primitive bounding boxes and knows nothing else
+//! about the primitives: traversal hands candidate primitive indices to a closure that does
+//! the exact test (the design of the `obvhs` crate). The same structure therefore serves as
+//! the bottom level (triangles of one mesh) and as the top level (objects, which may be
+//! transformed instances of shared meshes). Closest hit and any hit are separate queries.
+//!
+//! The kind is chosen at run time ([`AccelKind`]) but only once per render:
+//! [`AccelKind::build_world`] returns an [`AnyWorld`], an enum over `World<A>` for each
+//! implementation, and the render loop is generic over `A`, so traversal has no dynamic
+//! dispatch.
+
+mod brute;
+mod bvh;
+
+use std::fmt;
+use std::str::FromStr;
+
+pub use brute::Brute;
+pub use bvh::{Bvh, SplitMethod};
+
+use crate::geometry::{Aabb, Ray};
+use crate::scene::{Scene, World};
+
+/// The interface every acceleration structure implements.
+pub trait Accel: Send + Sync + Sized {
+    /// Build settings: [`AccelParams`] or a superset of them.
+    type Params: BuildParams;
+
+    /// Builds over the primitives' boxes; primitive `i` has box `boxes[i]`. Empty boxes are
+    /// allowed (such primitives are never reported).
+    fn build(boxes: &[Aabb], params: &Self::Params) -> Self;
+
+    /// Closest-hit query. Calls `test(prim, t_max)` for candidate primitives; `test` returns
+    /// `Some(t)` for a hit with `t < t_max` (and records what it needs), after which only
+    /// closer hits are sought. `t_max` is updated in place; returns whether anything was hit.
+    fn closest(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+    ) -> bool;
+
+    /// Any-hit query: stops at the first primitive for which `test(prim, t_max)` is true.
+    fn any(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool;
+
+    /// Size and shape of the structure.
+    fn stats(&self) -> AccelStats;
+}
+
+/// Build settings shared by the accelerators (each uses those that apply to it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AccelParams {
+    /// A node with this many primitives or fewer becomes a leaf.
+    pub max_leaf_prims: usize,
+    /// Depth limit of top-down builds; the lecture's 24. A node at this depth becomes a leaf
+    /// whatever its size.
+    pub max_depth: usize,
+    /// SAH cost of traversing one node, relative to `intersect_cost`.
+    pub traversal_cost: f32,
+    /// SAH cost of one primitive test.
+    pub intersect_cost: f32,
+}
+
+impl Default for AccelParams {
+    fn default() -> Self {
+        AccelParams {
+            max_leaf_prims: 4,
+            max_depth: 24,
+            traversal_cost: 1.0,
+            intersect_cost: 1.0,
+        }
+    }
+}
+
+/// What a built structure looks like.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AccelStats {
+    pub nodes: usize,
+    pub leaves: usize,
+    pub max_depth: usize,
+    /// Primitive references in leaves (more than the primitive count where they are duplicated).
+    pub prim_refs: usize,
+    /// Bytes of the structure itself (nodes and index arrays).
+    pub bytes: usize,
+    /// SAH cost of the tree with the build's costs, relative to the root box.
+    pub sah_cost: f32,
+}
+
+/// The accelerators that can be chosen by name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum AccelKind {
+    /// Tests every primitive: the correctness oracle.
+    Brute,
+    /// Top-down BVH with the given split method.
+    Bvh(SplitMethod),
+}
+
+impl AccelKind {
+    /// Every kind, in the order tables list them.
+    pub const ALL: [AccelKind; 4] = [
+        AccelKind::Brute,
+        AccelKind::Bvh(SplitMethod::Center),
+        AccelKind::Bvh(SplitMethod::Median),
+        AccelKind::Bvh(SplitMethod::Sah),
+    ];
+
+    /// What `default` means: the fastest implementation.
+    pub const DEFAULT: AccelKind = AccelKind::Bvh(SplitMethod::Sah);
+
+    pub fn name(self) -> &'static str {
+        match self {
+            AccelKind::Brute => "brute",
+            AccelKind::Bvh(SplitMethod::Center) => "bvh-center",
+            AccelKind::Bvh(SplitMethod::Median) => "bvh-median",
+            AccelKind::Bvh(SplitMethod::Sah) => "bvh-sah",
+        }
+    }
+
+    /// Builds the acceleration structure over `scene` (one per mesh and one over the objects).
+    pub fn build_world<'s>(self, scene: &'s Scene, params: &AccelParams) -> AnyWorld<'s> {
+        match self {
+            AccelKind::Brute => AnyWorld::Brute(World::build(scene, params)),
+            AccelKind::Bvh(split) => {
+                let p = BvhParams {
+                    split,
+                    base: *params,
+                };
+                AnyWorld::Bvh(World::build(scene, &p))
+            }
+        }
+    }
+}
+
+impl fmt::Display for AccelKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for AccelKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "default" || s == "bvh" {
+            return Ok(AccelKind::DEFAULT);
+        }
+        AccelKind::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = AccelKind::ALL.iter().map(|k| k.name()).collect();
+                format!(
+                    "unknown accelerator '{s}' (expected default, {})",
+                    names.join(", ")
+                )
+            })
+    }
+}
+
+/// Parameters as the BVH sees them: the split method plus the shared settings.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhParams {
+    pub split: SplitMethod,
+    pub base: AccelParams,
+}
+
+/// Build parameters that an accelerator type accepts.
+pub trait BuildParams: Sync + Send + Copy {
+    fn base(&self) -> &AccelParams;
+}
+impl BuildParams for AccelParams {
+    fn base(&self) -> &AccelParams {
+        self
+    }
+}
+impl BuildParams for BvhParams {
+    fn base(&self) -> &AccelParams {
+        &self.base
+    }
+}
+
+/// A world built with one of the accelerators; `match` on it once, then work generically.
+pub enum AnyWorld<'s> {
+    Brute(World<'s, Brute>),
+    Bvh(World<'s, Bvh>),
+}
+
+/// Runs `$body` with `$w` bound to the concrete `World<A>` inside an [`AnyWorld`].
+#[macro_export]
+macro_rules! with_world {
+    ($any:expr, $w:ident => $body:expr) => {
+        match $any {
+            $crate::accel::AnyWorld::Brute($w) => $body,
+            $crate::accel::AnyWorld::Bvh($w) => $body,
+        }
+    };
+}

@@ -1,0 +1,157 @@
+//! Cameras: perspective (pinhole), thin lens and orthographic, all placed by look-at.
+
+use glam::{Vec2, Vec3};
+
+use crate::geometry::Ray;
+use crate::sampling::concentric_disk;
+
+/// How film points map to rays.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Projection {
+    /// Pinhole; `fov_y` is the full vertical field of view in degrees.
+    Perspective { fov_y: f32 },
+    /// Thin lens of radius `aperture` focused at `focus_distance` along the view direction.
+    ThinLens {
+        fov_y: f32,
+        aperture: f32,
+        focus_distance: f32,
+    },
+    /// Parallel rays; `half_height` is half the height of the view in world units.
+    Orthographic { half_height: f32 },
+}
+
+/// A camera placed by eye, target and up vector.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    forward: Vec3,
+    right: Vec3,
+    up: Vec3,
+    pub projection: Projection,
+}
+
+impl Camera {
+    /// `None` if the view direction is zero or parallel to `up`, or anything is not finite.
+    pub fn look_at(eye: Vec3, target: Vec3, up: Vec3, projection: Projection) -> Option<Camera> {
+        let forward = (target - eye).normalize_or_zero();
+        let right = forward.cross(up).normalize_or_zero();
+        if forward == Vec3::ZERO || right == Vec3::ZERO || !eye.is_finite() {
+            return None;
+        }
+        let up = right.cross(forward);
+        Some(Camera {
+            eye,
+            forward,
+            right,
+            up,
+            projection,
+        })
+    }
+
+    pub fn forward(&self) -> Vec3 {
+        self.forward
+    }
+
+    /// The ray through film position `film` (in pixels, origin top left, y down) of a
+    /// `width × height` image; `lens` is a uniform sample for the aperture.
+    pub fn ray(&self, film: Vec2, width: u32, height: u32, lens: Vec2) -> Ray {
+        let aspect = width as f32 / height as f32;
+        // Screen coordinates: y in [-1, 1] up, x in [-aspect, aspect] right.
+        let sx = (2.0 * film.x / width as f32 - 1.0) * aspect;
+        let sy = 1.0 - 2.0 * film.y / height as f32;
+        match self.projection {
+            Projection::Perspective { fov_y } => {
+                let t = (fov_y.to_radians() * 0.5).tan();
+                let d = self.forward + self.right * (sx * t) + self.up * (sy * t);
+                Ray::new(self.eye, d.normalize())
+            }
+            Projection::ThinLens {
+                fov_y,
+                aperture,
+                focus_distance,
+            } => {
+                let t = (fov_y.to_radians() * 0.5).tan();
+                let d = self.forward + self.right * (sx * t) + self.up * (sy * t);
+                let focus = self.eye + d * focus_distance;
+                let l = concentric_disk(lens) * aperture;
+                let o = self.eye + self.right * l.x + self.up * l.y;
+                Ray::new(o, (focus - o).normalize())
+            }
+            Projection::Orthographic { half_height } => {
+                let o = self.eye + self.right * (sx * half_height) + self.up * (sy * half_height);
+                Ray::new(o, self.forward)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn centre_ray_looks_at_target_and_corners_span_fov() {
+        let c = Camera::look_at(
+            Vec3::ZERO,
+            -Vec3::Z,
+            Vec3::Y,
+            Projection::Perspective { fov_y: 90.0 },
+        )
+        .unwrap();
+        let r = c.ray(Vec2::new(50.0, 50.0), 100, 100, Vec2::ZERO);
+        assert!((r.d - -Vec3::Z).length() < 1e-6);
+        let top = c.ray(Vec2::new(50.0, 0.0), 100, 100, Vec2::ZERO);
+        assert!((top.d.y.atan2(-top.d.z).to_degrees() - 45.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn thin_lens_rays_converge_at_focus_distance() {
+        let p = Projection::ThinLens {
+            fov_y: 40.0,
+            aperture: 0.5,
+            focus_distance: 3.0,
+        };
+        let c = Camera::look_at(Vec3::ZERO, -Vec3::Z, Vec3::Y, p).unwrap();
+        let film = Vec2::new(30.0, 70.0);
+        let a = c.ray(film, 100, 100, Vec2::new(0.1, 0.9));
+        let b = c.ray(film, 100, 100, Vec2::new(0.8, 0.3));
+        let ta = -3.0 / a.d.z;
+        let tb = -3.0 / b.d.z;
+        assert!((a.at(ta) - b.at(tb)).length() < 1e-4);
+        assert!((a.o - b.o).length() > 0.1);
+    }
+
+    #[test]
+    fn orthographic_rays_are_parallel() {
+        let c = Camera::look_at(
+            Vec3::Z,
+            Vec3::ZERO,
+            Vec3::Y,
+            Projection::Orthographic { half_height: 2.0 },
+        )
+        .unwrap();
+        let a = c.ray(Vec2::new(0.0, 0.0), 10, 10, Vec2::ZERO);
+        let b = c.ray(Vec2::new(10.0, 10.0), 10, 10, Vec2::ZERO);
+        assert_eq!(a.d, b.d);
+        assert!((a.o - Vec3::new(-2.0, 2.0, 1.0)).length() < 1e-6);
+        assert!((b.o - Vec3::new(2.0, -2.0, 1.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn degenerate_look_at_is_rejected() {
+        assert!(Camera::look_at(
+            Vec3::ZERO,
+            Vec3::Y,
+            Vec3::Y,
+            Projection::Perspective { fov_y: 40.0 }
+        )
+        .is_none());
+        assert!(Camera::look_at(
+            Vec3::ZERO,
+            Vec3::ZERO,
+            Vec3::Y,
+            Projection::Perspective { fov_y: 40.0 }
+        )
+        .is_none());
+    }
+}

@@ -1,0 +1,252 @@
+//! The lecture's recursive ray tracer (Whitted 1980), with physically based ingredients.
+//!
+//! At each hit: emission (if the object is a light) + direct light from every light through
+//! shadow rays (several, stratified, for area lights) + the ambient term + the delta lobes,
+//! each of which spawns a child ray of the ray tree:
+//! - mirrors and smooth conductors spawn a reflected ray weighted by Fresnel (or the constant
+//!   reflectance);
+//! - dielectrics spawn *both* a reflected ray (weight `F`) and a refracted ray (weight `1 - F`,
+//!   times `1/η²` for the change of radiance across the boundary); beyond the critical angle
+//!   only the reflected ray, with weight 1 (total internal reflection);
+//! - glazed surfaces spawn the coat's reflection (`F`); the base's share is direct light.
+//!
+//! A branch is pruned when it would go deeper than `max_depth` or when the product of weights
+//! from the camera down to it falls below `min_attenuation` (in every channel).
+//! Shadow rays are blocked by any surface, glass included (no caustics: that is Whitted).
+
+use glam::Vec3;
+
+use super::{Integrator, RayStats};
+use crate::accel::Accel;
+use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
+use crate::material::{conductor_fresnel, fresnel, Material};
+use crate::sampling::{stratified_2d, Pcg32};
+use crate::scene::{Intersection, World};
+use crate::Rgb;
+
+/// Whitted-style recursive ray tracing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Whitted {
+    /// Maximum depth of the ray tree: 0 traces only camera (and shadow) rays.
+    pub max_depth: u32,
+    /// Branches whose accumulated weight falls below this (in every channel) are pruned.
+    pub min_attenuation: f32,
+}
+
+impl Default for Whitted {
+    fn default() -> Self {
+        Whitted {
+            max_depth: 10,
+            min_attenuation: 1e-3,
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Kind {
+    Reflection,
+    Refraction,
+}
+
+struct Ctx<'a, 'w, A: Accel> {
+    world: &'a World<'w, A>,
+    rng: &'a mut Pcg32,
+    stats: &'a mut RayStats,
+}
+
+impl Integrator for Whitted {
+    fn radiance<A: Accel>(
+        &self,
+        world: &World<A>,
+        ray: &Ray,
+        rng: &mut Pcg32,
+        stats: &mut RayStats,
+    ) -> Rgb {
+        let mut ctx = Ctx { world, rng, stats };
+        self.trace(&mut ctx, ray, 0, Rgb::ONE)
+    }
+}
+
+impl Whitted {
+    fn trace<A: Accel>(&self, cx: &mut Ctx<A>, ray: &Ray, depth: u32, throughput: Rgb) -> Rgb {
+        let Some(hit) = cx.world.intersect(ray, f32::INFINITY) else {
+            return cx.world.scene.background;
+        };
+        let scene = cx.world.scene;
+        let obj = &scene.objects[hit.object as usize];
+        let material = scene.materials[obj.material];
+        let wo = (-ray.d).normalize();
+        let front = wo.dot(hit.ng) > 0.0;
+        let mut l = Rgb::ZERO;
+        if front && obj.emission != Rgb::ZERO {
+            l += obj.emission;
+        }
+        // Opaque surfaces shade on the side the ray arrives from (two-sided).
+        let (ng, mut ns) = if front {
+            (hit.ng, hit.ns)
+        } else {
+            (-hit.ng, -hit.ns)
+        };
+        if ns.dot(wo) <= 0.0 {
+            ns = ng;
+        }
+        if material.has_direct() {
+            l += self.direct(cx, &hit, &material, ng, ns, wo);
+            l += scene.ambient * material.diffuse_albedo();
+        }
+        let cos_o = ns.dot(wo).clamp(0.0, 1.0);
+        match material {
+            Material::Mirror { reflectance } => {
+                l += self.child(
+                    cx,
+                    &hit,
+                    ng,
+                    fresnel::reflect(wo, ns),
+                    reflectance,
+                    Kind::Reflection,
+                    depth,
+                    throughput,
+                );
+            }
+            Material::Conductor { eta, k, roughness } if roughness == 0.0 => {
+                let f = conductor_fresnel(cos_o, eta, k);
+                l += self.child(
+                    cx,
+                    &hit,
+                    ng,
+                    fresnel::reflect(wo, ns),
+                    f,
+                    Kind::Reflection,
+                    depth,
+                    throughput,
+                );
+            }
+            Material::Glazed { ior, .. } => {
+                let f = fresnel::dielectric(cos_o, ior);
+                l += self.child(
+                    cx,
+                    &hit,
+                    ng,
+                    fresnel::reflect(wo, ns),
+                    Rgb::splat(f),
+                    Kind::Reflection,
+                    depth,
+                    throughput,
+                );
+            }
+            Material::Dielectric { ior, transmittance } => {
+                // `front`: arriving from outside (the side the geometric normal points to).
+                let eta = if front { ior } else { 1.0 / ior };
+                let cos = ns.dot(wo).clamp(-1.0, 1.0).max(0.0);
+                let r = fresnel::reflect(wo, ns);
+                match fresnel::refract(wo, ns, eta) {
+                    None => {
+                        cx.stats.total_internal_reflections += 1;
+                        l += self.child(
+                            cx,
+                            &hit,
+                            ng,
+                            r,
+                            Rgb::ONE,
+                            Kind::Reflection,
+                            depth,
+                            throughput,
+                        );
+                    }
+                    Some(t) => {
+                        let f = fresnel::dielectric(cos, eta);
+                        l += self.child(
+                            cx,
+                            &hit,
+                            ng,
+                            r,
+                            Rgb::splat(f),
+                            Kind::Reflection,
+                            depth,
+                            throughput,
+                        );
+                        let w = transmittance * ((1.0 - f) / (eta * eta));
+                        l += self.child(cx, &hit, ng, t, w, Kind::Refraction, depth, throughput);
+                    }
+                }
+            }
+            _ => {}
+        }
+        l
+    }
+
+    /// Traces one branch of the ray tree, unless it is pruned.
+    #[allow(clippy::too_many_arguments)]
+    fn child<A: Accel>(
+        &self,
+        cx: &mut Ctx<A>,
+        hit: &Intersection,
+        ng: Vec3,
+        dir: Vec3,
+        weight: Rgb,
+        kind: Kind,
+        depth: u32,
+        throughput: Rgb,
+    ) -> Rgb {
+        if weight.max_element() <= 0.0 {
+            return Rgb::ZERO;
+        }
+        if depth >= self.max_depth {
+            cx.stats.pruned_depth += 1;
+            return Rgb::ZERO;
+        }
+        let tp = throughput * weight;
+        if tp.max_element() < self.min_attenuation {
+            cx.stats.pruned_attenuation += 1;
+            return Rgb::ZERO;
+        }
+        match kind {
+            Kind::Reflection => cx.stats.reflection += 1,
+            Kind::Refraction => cx.stats.refraction += 1,
+        }
+        weight * self.trace(cx, &spawn_ray(hit.p, ng, dir), depth + 1, tp)
+    }
+
+    /// Direct light from every light source, with shadow rays.
+    fn direct<A: Accel>(
+        &self,
+        cx: &mut Ctx<A>,
+        hit: &Intersection,
+        m: &Material,
+        ng: Vec3,
+        ns: Vec3,
+        wo: Vec3,
+    ) -> Rgb {
+        let mut sum = Rgb::ZERO;
+        for (li, light) in cx.world.lights.iter().enumerate() {
+            let n = light.samples();
+            let mut acc = Rgb::ZERO;
+            for s in 0..n {
+                let u = stratified_2d(s, n, li as u32 ^ 0x9e37_79b9, cx.rng);
+                let Some(ls) = light.sample(hit.p, u) else {
+                    continue;
+                };
+                if ls.wi.dot(ng) <= 0.0 {
+                    continue; // Light below the geometric surface.
+                }
+                let f = m.eval_direct(ns, wo, ls.wi);
+                if f.max_element() <= 0.0 || ls.value.max_element() <= 0.0 {
+                    continue;
+                }
+                cx.stats.shadow += 1;
+                let blocked = if ls.infinite {
+                    cx.world
+                        .occluded(&spawn_ray(hit.p, ng, ls.wi), f32::INFINITY)
+                } else {
+                    let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p, ls.n);
+                    cx.world.occluded(&r, t_max)
+                };
+                if !blocked {
+                    acc += f * ls.value;
+                }
+            }
+            sum += acc / n as f32;
+        }
+        sum
+    }
+}

@@ -1,0 +1,227 @@
+//! Random numbers and warps.
+//!
+//! Determinism: every random number the renderer uses comes from a [`Pcg32`] stream seeded by
+//! hashing `(seed, pixel index, sample index)` (see [`Pcg32::for_sample`]), and a sample draws
+//! its dimensions in a fixed order. Nothing depends on which thread renders which pixel, so an
+//! image is bit-identical whatever the thread count.
+
+use glam::{Vec2, Vec3};
+
+/// PCG32 (O'Neill 2014): 64-bit state, 32-bit output.
+#[derive(Clone, Debug)]
+pub struct Pcg32 {
+    state: u64,
+    inc: u64,
+}
+
+const PCG_MULT: u64 = 0x5851_f42d_4c95_7f2d;
+
+/// A strong 64-bit mix (the SplitMix64 finalizer).
+#[inline]
+pub fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+impl Pcg32 {
+    pub fn new(seed: u64, stream: u64) -> Pcg32 {
+        let mut r = Pcg32 {
+            state: 0,
+            inc: (stream << 1) | 1,
+        };
+        r.next_u32();
+        r.state = r.state.wrapping_add(seed);
+        r.next_u32();
+        r
+    }
+
+    /// The stream for one camera sample: a function of the user's seed, the pixel and the sample.
+    pub fn for_sample(seed: u64, pixel: u64, sample: u64) -> Pcg32 {
+        let h = mix64(seed ^ mix64(pixel.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ mix64(sample)));
+        Pcg32::new(h, mix64(h ^ 0xda3e_39cb_94b9_5bdb))
+    }
+
+    #[inline]
+    pub fn next_u32(&mut self) -> u32 {
+        let old = self.state;
+        self.state = old.wrapping_mul(PCG_MULT).wrapping_add(self.inc);
+        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
+        let rot = (old >> 59) as u32;
+        xorshifted.rotate_right(rot)
+    }
+
+    /// Uniform in `[0, 1)`, 24 bits of resolution.
+    #[inline]
+    pub fn next_f32(&mut self) -> f32 {
+        (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
+
+    #[inline]
+    pub fn next_2d(&mut self) -> Vec2 {
+        let x = self.next_f32();
+        Vec2::new(x, self.next_f32())
+    }
+}
+
+/// Kensler's hash-based permutation of `0..n` ("Correlated Multi-Jittered Sampling", 2013):
+/// `permute(i, n, key)` for `i in 0..n` visits each of `0..n` exactly once.
+pub fn permute(mut i: u32, n: u32, key: u32) -> u32 {
+    if n <= 1 {
+        return 0;
+    }
+    let mut w = n - 1;
+    w |= w >> 1;
+    w |= w >> 2;
+    w |= w >> 4;
+    w |= w >> 8;
+    w |= w >> 16;
+    loop {
+        i ^= key;
+        i = i.wrapping_mul(0xe170_893d);
+        i ^= key >> 16;
+        i ^= (i & w) >> 4;
+        i ^= key >> 8;
+        i = i.wrapping_mul(0x0929_eb3f);
+        i ^= key >> 23;
+        i ^= (i & w) >> 1;
+        i = i.wrapping_mul(1 | (key >> 27));
+        i = i.wrapping_mul(0x6935_fa69);
+        i ^= (i & w) >> 11;
+        i = i.wrapping_mul(0x74dc_b303);
+        i ^= (i & w) >> 2;
+        i = i.wrapping_mul(0x9e50_1cc3);
+        i ^= (i & w) >> 2;
+        i = i.wrapping_mul(0xc860_a3df);
+        i &= w;
+        i ^= i >> 5;
+        if i < n {
+            break;
+        }
+    }
+    (i.wrapping_add(key)) % n
+}
+
+/// Sample `i` of `n` stratified in 2D: a jittered grid when `n` is a square, otherwise a Latin
+/// hypercube (one sample per row and per column), with a `key`-dependent pairing of the strata.
+pub fn stratified_2d(i: u32, n: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
+    let j = rng.next_2d();
+    let k = (n as f32).sqrt() as u32;
+    if k * k == n {
+        let cell = permute(i, n, key);
+        Vec2::new(
+            ((cell % k) as f32 + j.x) / k as f32,
+            ((cell / k) as f32 + j.y) / k as f32,
+        )
+    } else {
+        let row = permute(i, n, key);
+        Vec2::new((i as f32 + j.x) / n as f32, (row as f32 + j.y) / n as f32)
+    }
+    .min(Vec2::splat(1.0 - f32::EPSILON / 2.0))
+}
+
+/// Uniform point on the unit disk (Shirley–Chiu concentric map).
+pub fn concentric_disk(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o == Vec2::ZERO {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, std::f32::consts::FRAC_PI_4 * (o.y / o.x))
+    } else {
+        (
+            o.y,
+            std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y),
+        )
+    };
+    r * Vec2::new(theta.cos(), theta.sin())
+}
+
+/// Direction uniform within the cone of half-angle `acos(cos_max)` about +z; pdf `1/(2π(1-cos_max))`.
+pub fn uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
+    let cos_t = (1.0 - u.x) + u.x * cos_max;
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = u.y * std::f32::consts::TAU;
+    Vec3::new(phi.cos() * sin_t, phi.sin() * sin_t, cos_t)
+}
+
+/// Barycentrics `(b1, b2)` uniform over a triangle (area preserving square-root map).
+pub fn uniform_triangle(u: Vec2) -> (f32, f32) {
+    let su = u.x.sqrt();
+    (1.0 - su, u.y * su)
+}
+
+/// Index `i` with probability `weights[i] / sum`, by inverse CDF, given `cdf` from [`build_cdf`];
+/// returns the index and `u` rescaled to `[0, 1)` within the chosen interval.
+pub fn sample_cdf(cdf: &[f32], u: f32) -> (usize, f32) {
+    let total = *cdf.last().unwrap_or(&0.0);
+    let x = u * total;
+    let i = cdf
+        .partition_point(|&c| c <= x)
+        .min(cdf.len().saturating_sub(1));
+    let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
+    let w = cdf[i] - lo;
+    (
+        i,
+        if w > 0.0 {
+            ((x - lo) / w).clamp(0.0, 1.0 - f32::EPSILON)
+        } else {
+            0.0
+        },
+    )
+}
+
+/// Running sums of `weights` (the unnormalised CDF).
+pub fn build_cdf(weights: impl IntoIterator<Item = f32>) -> Vec<f32> {
+    let mut acc = 0.0f64;
+    weights
+        .into_iter()
+        .map(|w| {
+            acc += w.max(0.0) as f64;
+            acc as f32
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn permute_is_a_permutation() {
+        for n in [1u32, 2, 3, 7, 16, 100] {
+            for key in [0u32, 1, 0xdead_beef] {
+                let mut seen = vec![false; n as usize];
+                for i in 0..n {
+                    let p = permute(i, n, key) as usize;
+                    assert!(!seen[p]);
+                    seen[p] = true;
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn stratified_samples_cover_each_stratum_once() {
+        let mut rng = Pcg32::new(1, 2);
+        for n in [16u32, 10] {
+            let pts: Vec<Vec2> = (0..n).map(|i| stratified_2d(i, n, 77, &mut rng)).collect();
+            let mut cols: Vec<u32> = pts.iter().map(|p| (p.x * n as f32) as u32).collect();
+            cols.sort();
+            if n == 10 {
+                assert_eq!(cols, (0..n).collect::<Vec<_>>());
+            }
+            assert!(pts
+                .iter()
+                .all(|p| p.x >= 0.0 && p.x < 1.0 && p.y >= 0.0 && p.y < 1.0));
+        }
+    }
+
+    #[test]
+    fn cdf_sampling_follows_weights() {
+        let cdf = build_cdf([1.0, 0.0, 3.0]);
+        assert_eq!(sample_cdf(&cdf, 0.1).0, 0);
+        assert_eq!(sample_cdf(&cdf, 0.26).0, 2);
+        assert_eq!(sample_cdf(&cdf, 0.999).0, 2);
+    }
+}

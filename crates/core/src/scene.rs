@@ -1,0 +1,354 @@
+//! The scene (what is in the world) and the [`World`] (the scene plus an acceleration
+//! structure built over it). The scene never knows which accelerator it is held in.
+
+use glam::{Vec2, Vec3};
+
+use crate::accel::Accel;
+use crate::camera::Camera;
+use crate::geometry::{Aabb, Ray, Transform};
+use crate::light::{AreaLight, AreaShape, Light};
+use crate::material::Material;
+use crate::sampling::build_cdf;
+use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Sphere, WatertightRay};
+use crate::Rgb;
+
+/// Shared geometry: an object refers to it by index, so many objects (instances) can share
+/// one mesh and its acceleration structure without copying triangles.
+#[derive(Clone, Debug)]
+pub enum Geometry {
+    Mesh(Mesh),
+    Sphere(Sphere),
+}
+
+impl Geometry {
+    pub fn aabb(&self) -> Aabb {
+        match self {
+            Geometry::Mesh(m) => m.aabb(),
+            Geometry::Sphere(s) => s.aabb(),
+        }
+    }
+}
+
+/// A thing in the scene: geometry, placed by an optional transform, with a material, and
+/// emitting `emission` (an area light) if that is not black.
+#[derive(Clone, Debug)]
+pub struct Object {
+    pub geometry: usize,
+    pub transform: Option<Transform>,
+    pub material: usize,
+    pub emission: Rgb,
+    /// Shadow rays per shading point when this object is a light.
+    pub light_samples: u32,
+}
+
+/// Everything that is rendered.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub geometries: Vec<Geometry>,
+    pub objects: Vec<Object>,
+    pub materials: Vec<Material>,
+    /// Point, spot and directional lights. Area lights come from emissive objects.
+    pub lights: Vec<Light>,
+    pub camera: Camera,
+    /// Radiance of rays that leave the scene.
+    pub background: Rgb,
+    /// Whitted's ambient term: constant radiance that reaches every diffuse surface unshadowed.
+    pub ambient: Rgb,
+}
+
+impl Scene {
+    /// Checks that every index refers to something and that emissive objects can be sampled.
+    pub fn check(&self) -> Result<(), String> {
+        for (i, o) in self.objects.iter().enumerate() {
+            if o.geometry >= self.geometries.len() {
+                return Err(format!(
+                    "object {i} refers to geometry {} of {}",
+                    o.geometry,
+                    self.geometries.len()
+                ));
+            }
+            if o.material >= self.materials.len() {
+                return Err(format!(
+                    "object {i} refers to material {} of {}",
+                    o.material,
+                    self.materials.len()
+                ));
+            }
+            if o.emission != Rgb::ZERO {
+                if let (Geometry::Sphere(_), Some(t)) = (&self.geometries[o.geometry], &o.transform)
+                {
+                    if t.uniform_scale().is_none() {
+                        return Err(format!(
+                            "object {i}: an emissive sphere may only be scaled uniformly"
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// World-space bounds of everything.
+    pub fn aabb(&self) -> Aabb {
+        self.objects
+            .iter()
+            .fold(Aabb::EMPTY, |b, o| b.union(self.object_aabb(o)))
+    }
+
+    fn object_aabb(&self, o: &Object) -> Aabb {
+        let b = self.geometries[o.geometry].aabb();
+        match &o.transform {
+            Some(t) => t.aabb(&b),
+            None => b,
+        }
+    }
+
+    /// Total triangle count as rendered (instances counted once per instance).
+    pub fn triangle_count(&self) -> usize {
+        self.objects
+            .iter()
+            .map(|o| match &self.geometries[o.geometry] {
+                Geometry::Mesh(m) => m.indices.len(),
+                Geometry::Sphere(_) => 0,
+            })
+            .sum()
+    }
+
+    fn area_light(&self, index: usize, o: &Object) -> AreaLight {
+        let shape = match &self.geometries[o.geometry] {
+            Geometry::Sphere(s) => {
+                let (center, radius) = match &o.transform {
+                    Some(t) => (
+                        t.point(s.center),
+                        s.radius * t.uniform_scale().unwrap_or(1.0),
+                    ),
+                    None => (s.center, s.radius),
+                };
+                AreaShape::Sphere(Sphere { center, radius })
+            }
+            Geometry::Mesh(m) => {
+                let tris: Vec<[Vec3; 3]> = (0..m.indices.len())
+                    .map(|i| {
+                        let t = m.triangle(i);
+                        match &o.transform {
+                            Some(x) => t.map(|p| x.point(p)),
+                            None => t,
+                        }
+                    })
+                    .collect();
+                let cdf = build_cdf(
+                    tris.iter()
+                        .map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()),
+                );
+                AreaShape::Triangles { tris, cdf }
+            }
+        };
+        AreaLight {
+            object: index as u32,
+            emission: o.emission,
+            samples: o.light_samples.max(1),
+            shape,
+        }
+    }
+}
+
+/// A surface hit with everything shading needs, in world space.
+#[derive(Clone, Copy, Debug)]
+pub struct Intersection {
+    pub t: f32,
+    pub p: Vec3,
+    /// Unit geometric normal: the winding normal for meshes without normals, otherwise on the
+    /// side of the shading normals; outward for spheres. Not flipped towards the ray.
+    pub ng: Vec3,
+    /// Unit shading normal (interpolated vertex normals where the mesh has them), in the same
+    /// hemisphere as `ng`.
+    pub ns: Vec3,
+    pub uv: Vec2,
+    pub object: u32,
+}
+
+/// A scene with its acceleration structures: one per mesh (bottom level) and one over the
+/// objects (top level). Also the list of all lights, area lights included.
+pub struct World<'s, A: Accel> {
+    pub scene: &'s Scene,
+    top: A,
+    blas: Vec<Option<A>>,
+    pub lights: Vec<Light>,
+}
+
+impl<'s, A: Accel> World<'s, A> {
+    pub fn build(scene: &'s Scene, params: &A::Params) -> World<'s, A> {
+        use rayon::prelude::*;
+        let blas: Vec<Option<A>> = scene
+            .geometries
+            .par_iter()
+            .map(|g| match g {
+                Geometry::Mesh(m) => {
+                    let boxes: Vec<Aabb> =
+                        (0..m.indices.len()).map(|i| m.triangle_aabb(i)).collect();
+                    Some(A::build(&boxes, params))
+                }
+                Geometry::Sphere(_) => None,
+            })
+            .collect();
+        let boxes: Vec<Aabb> = scene.objects.iter().map(|o| scene.object_aabb(o)).collect();
+        let top = A::build(&boxes, params);
+        let mut lights = scene.lights.clone();
+        for (i, o) in scene.objects.iter().enumerate() {
+            if o.emission != Rgb::ZERO && o.emission.is_finite() {
+                lights.push(Light::Area(scene.area_light(i, o)));
+            }
+        }
+        World {
+            scene,
+            top,
+            blas,
+            lights,
+        }
+    }
+
+    /// The top-level structure and the bottom-level one of each geometry (None for spheres).
+    pub fn structures(&self) -> (&A, &[Option<A>]) {
+        (&self.top, &self.blas)
+    }
+
+    /// Closest hit with `0 < t < t_max`.
+    pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Intersection> {
+        // (object, primitive, b1, b2)
+        let mut best: Option<(u32, u32, f32, f32)> = None;
+        let mut t = t_max;
+        self.top.closest(ray, &mut t, |obj, tmax| {
+            let o = &self.scene.objects[obj as usize];
+            let local = match &o.transform {
+                Some(x) => x.ray_to_object(ray),
+                None => *ray,
+            };
+            match &self.scene.geometries[o.geometry] {
+                Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
+                    best = Some((obj, 0, 0.0, 0.0));
+                }),
+                Geometry::Mesh(m) => {
+                    let accel = self.blas[o.geometry].as_ref()?;
+                    let wr = WatertightRay::new(local.o, local.d);
+                    let mut tm = tmax;
+                    let mut rec = None;
+                    accel.closest(&local, &mut tm, |tri, tmx| {
+                        let [a, b, c] = m.triangle(tri as usize);
+                        intersect_triangle(&wr, a, b, c, tmx).map(|h| {
+                            rec = Some((tri, h.b1, h.b2));
+                            h.t
+                        })
+                    });
+                    rec.map(|(tri, b1, b2)| {
+                        best = Some((obj, tri, b1, b2));
+                        tm
+                    })
+                }
+            }
+        });
+        let (obj, prim, b1, b2) = best?;
+        Some(self.interaction(ray, t, obj, prim, b1, b2))
+    }
+
+    /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
+    pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        self.top.any(ray, t_max, |obj, tmax| {
+            let o = &self.scene.objects[obj as usize];
+            let local = match &o.transform {
+                Some(x) => x.ray_to_object(ray),
+                None => *ray,
+            };
+            match &self.scene.geometries[o.geometry] {
+                Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).is_some(),
+                Geometry::Mesh(m) => {
+                    let Some(accel) = self.blas[o.geometry].as_ref() else {
+                        return false;
+                    };
+                    let wr = WatertightRay::new(local.o, local.d);
+                    accel.any(&local, tmax, |tri, tmx| {
+                        let [a, b, c] = m.triangle(tri as usize);
+                        intersect_triangle(&wr, a, b, c, tmx).is_some()
+                    })
+                }
+            }
+        })
+    }
+
+    fn interaction(
+        &self,
+        ray: &Ray,
+        t: f32,
+        obj: u32,
+        prim: u32,
+        b1: f32,
+        b2: f32,
+    ) -> Intersection {
+        let o = &self.scene.objects[obj as usize];
+        let (p, mut ng, mut ns, uv) = match &self.scene.geometries[o.geometry] {
+            Geometry::Sphere(s) => {
+                let local = match &o.transform {
+                    Some(x) => x.ray_to_object(ray),
+                    None => *ray,
+                };
+                // Re-project onto the surface to remove the error of o + t·d.
+                let n = (local.at(t) - s.center).normalize_or_zero();
+                let p = s.center + n * s.radius;
+                let uv = Vec2::new(
+                    0.5 + n.z.atan2(n.x) / std::f32::consts::TAU,
+                    n.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI,
+                );
+                (p, n, n, uv)
+            }
+            Geometry::Mesh(m) => {
+                let [i0, i1, i2] = m.indices[prim as usize];
+                let (i0, i1, i2) = (i0 as usize, i1 as usize, i2 as usize);
+                let b0 = 1.0 - b1 - b2;
+                let (p0, p1, p2) = (m.positions[i0], m.positions[i1], m.positions[i2]);
+                // The hit point from barycentrics is far more accurate than o + t·d.
+                let p = p0 * b0 + p1 * b1 + p2 * b2;
+                let mut ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+                let ns = match &m.normals {
+                    Some(n) => {
+                        let ns = (n[i0] * b0 + n[i1] * b1 + n[i2] * b2).normalize_or_zero();
+                        if ns == Vec3::ZERO {
+                            ng
+                        } else {
+                            if ng.dot(ns) < 0.0 {
+                                ng = -ng;
+                            }
+                            ns
+                        }
+                    }
+                    None => ng,
+                };
+                let uv = match &m.uvs {
+                    Some(u) => u[i0] * b0 + u[i1] * b1 + u[i2] * b2,
+                    None => Vec2::new(b1, b2),
+                };
+                (p, ng, ns, uv)
+            }
+        };
+        let p = match &o.transform {
+            Some(x) => {
+                ng = x.normal(ng).normalize_or_zero();
+                ns = x.normal(ns).normalize_or_zero();
+                x.point(p)
+            }
+            None => p,
+        };
+        if ng == Vec3::ZERO {
+            ng = -ray.d.normalize_or_zero();
+        }
+        if ns == Vec3::ZERO || ns.dot(ng) <= 0.0 {
+            ns = ng;
+        }
+        Intersection {
+            t,
+            p,
+            ng,
+            ns,
+            uv,
+            object: obj,
+        }
+    }
+}

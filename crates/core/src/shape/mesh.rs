@@ -1,0 +1,220 @@
+use std::fmt;
+
+use glam::{Vec2, Vec3};
+
+use crate::geometry::Aabb;
+
+/// An indexed triangle mesh: one shared vertex buffer, triangles as index triples.
+/// Optional per-vertex shading normals and texture coordinates (same length as `positions`).
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    pub normals: Option<Vec<Vec3>>,
+    pub uvs: Option<Vec<Vec2>>,
+    pub indices: Vec<[u32; 3]>,
+}
+
+/// Why a mesh is invalid.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MeshError {
+    NonFiniteVertex {
+        vertex: usize,
+    },
+    IndexOutOfRange {
+        triangle: usize,
+        index: u32,
+        vertices: usize,
+    },
+    AttributeLength {
+        attribute: &'static str,
+        len: usize,
+        vertices: usize,
+    },
+    TooManyVertices {
+        vertices: usize,
+    },
+}
+
+impl fmt::Display for MeshError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MeshError::NonFiniteVertex { vertex } => {
+                write!(f, "vertex {vertex} has a NaN or infinite coordinate")
+            }
+            MeshError::IndexOutOfRange {
+                triangle,
+                index,
+                vertices,
+            } => {
+                write!(f, "triangle {triangle} uses vertex index {index}, but the mesh has {vertices} vertices")
+            }
+            MeshError::AttributeLength {
+                attribute,
+                len,
+                vertices,
+            } => {
+                write!(f, "{len} {attribute} for {vertices} vertices")
+            }
+            MeshError::TooManyVertices { vertices } => {
+                write!(f, "{vertices} vertices do not fit 32-bit indices")
+            }
+        }
+    }
+}
+
+impl std::error::Error for MeshError {}
+
+impl Mesh {
+    /// Checks the invariants every consumer relies on: finite positions, indices in range,
+    /// attribute arrays as long as the position array. Non-finite or zero shading normals are
+    /// dropped (the geometric normal is used instead) rather than rejected.
+    pub fn validate(&mut self) -> Result<(), MeshError> {
+        let n = self.positions.len();
+        if n > u32::MAX as usize {
+            return Err(MeshError::TooManyVertices { vertices: n });
+        }
+        if let Some(vertex) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::NonFiniteVertex { vertex });
+        }
+        for (triangle, t) in self.indices.iter().enumerate() {
+            if let Some(&index) = t.iter().find(|&&i| i as usize >= n) {
+                return Err(MeshError::IndexOutOfRange {
+                    triangle,
+                    index,
+                    vertices: n,
+                });
+            }
+        }
+        if let Some(uv) = &self.uvs {
+            if uv.len() != n {
+                return Err(MeshError::AttributeLength {
+                    attribute: "texture coordinates",
+                    len: uv.len(),
+                    vertices: n,
+                });
+            }
+        }
+        if let Some(nn) = &self.normals {
+            if nn.len() != n {
+                return Err(MeshError::AttributeLength {
+                    attribute: "normals",
+                    len: nn.len(),
+                    vertices: n,
+                });
+            }
+            if nn
+                .iter()
+                .any(|v| !v.is_finite() || v.length_squared() == 0.0)
+            {
+                self.normals = None;
+            }
+        }
+        Ok(())
+    }
+
+    #[inline]
+    pub fn triangle(&self, i: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.indices[i];
+        [
+            self.positions[a as usize],
+            self.positions[b as usize],
+            self.positions[c as usize],
+        ]
+    }
+
+    pub fn triangle_aabb(&self, i: usize) -> Aabb {
+        Aabb::from_points(self.triangle(i))
+    }
+
+    pub fn aabb(&self) -> Aabb {
+        // Only vertices that triangles use.
+        self.indices
+            .iter()
+            .flatten()
+            .fold(Aabb::EMPTY, |b, &i| b.grow(self.positions[i as usize]))
+    }
+
+    pub fn triangle_area(&self, i: usize) -> f32 {
+        let [a, b, c] = self.triangle(i);
+        0.5 * (b - a).cross(c - a).length()
+    }
+
+    /// Drops triangles whose three indices are not all distinct; returns how many were dropped.
+    pub fn drop_degenerate_indices(&mut self) -> usize {
+        let before = self.indices.len();
+        self.indices.retain(|[a, b, c]| a != b && b != c && a != c);
+        before - self.indices.len()
+    }
+
+    /// An axis-aligned box `[min, max]` as 12 outward-facing triangles.
+    pub fn cuboid(min: Vec3, max: Vec3) -> Mesh {
+        let b = Aabb::new(min, max);
+        let positions = b.corners().to_vec();
+        // Corner index bits: x = 1, y = 2, z = 4. Faces wound counter-clockwise seen from outside.
+        let quads: [[u32; 4]; 6] = [
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+        ];
+        let indices = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        Mesh {
+            positions,
+            normals: None,
+            uvs: None,
+            indices,
+        }
+    }
+
+    /// A parallelogram `corner + s·edge1 + t·edge2`, `s, t ∈ [0, 1]`, facing `edge1 × edge2`.
+    pub fn quad(corner: Vec3, edge1: Vec3, edge2: Vec3) -> Mesh {
+        Mesh {
+            positions: vec![
+                corner,
+                corner + edge1,
+                corner + edge1 + edge2,
+                corner + edge2,
+            ],
+            normals: None,
+            uvs: Some(vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y]),
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cuboid_faces_point_outwards() {
+        let m = Mesh::cuboid(Vec3::ZERO, Vec3::ONE);
+        let c = Vec3::splat(0.5);
+        for i in 0..m.indices.len() {
+            let [a, b, d] = m.triangle(i);
+            let n = (b - a).cross(d - a);
+            assert!(n.dot(a - c) > 0.0, "face {i} points inwards");
+        }
+    }
+
+    #[test]
+    fn validation_catches_bad_meshes() {
+        let mut m = Mesh::cuboid(Vec3::ZERO, Vec3::ONE);
+        m.indices.push([0, 1, 8]);
+        assert!(matches!(
+            m.validate(),
+            Err(MeshError::IndexOutOfRange { index: 8, .. })
+        ));
+        let mut m = Mesh::cuboid(Vec3::ZERO, Vec3::ONE);
+        m.positions[3].y = f32::NAN;
+        assert!(matches!(
+            m.validate(),
+            Err(MeshError::NonFiniteVertex { vertex: 3 })
+        ));
+    }
+}

@@ -1,0 +1,107 @@
+//! Writing images: `.png` (8-bit sRGB) and `.exr` (linear 32-bit float RGB), chosen by the
+//! file's extension. The file is written whole or not at all: the bytes go to a temporary file
+//! in the same directory, which is then renamed over the destination.
+
+use std::io::{Cursor, Write};
+use std::path::{Path, PathBuf};
+
+use snell_core::image::Image;
+
+use crate::Error;
+
+/// Output formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    Png,
+    Exr,
+}
+
+/// The format for a path, from its extension.
+pub fn format_for(path: &Path) -> Result<ImageFormat, Error> {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .as_deref()
+    {
+        Some("png") => Ok(ImageFormat::Png),
+        Some("exr") => Ok(ImageFormat::Exr),
+        _ => Err(Error::new(
+            path,
+            "unsupported image format (the output must end in .png or .exr)",
+        )),
+    }
+}
+
+/// Encodes the image in memory.
+pub fn encode(image: &Image, format: ImageFormat) -> Result<Vec<u8>, String> {
+    let mut buf = Cursor::new(Vec::new());
+    match format {
+        ImageFormat::Png => {
+            let img = image::RgbImage::from_raw(image.width, image.height, image.to_srgb8())
+                .ok_or("image size does not match its pixels")?;
+            img.write_to(&mut buf, image::ImageFormat::Png)
+                .map_err(|e| e.to_string())?;
+        }
+        ImageFormat::Exr => {
+            let data: Vec<f32> = image.pixels.iter().flat_map(|p| p.to_array()).collect();
+            let img = image::Rgb32FImage::from_raw(image.width, image.height, data)
+                .ok_or("image size does not match its pixels")?;
+            image::DynamicImage::ImageRgb32F(img)
+                .write_to(&mut buf, image::ImageFormat::OpenExr)
+                .map_err(|e| e.to_string())?;
+        }
+    }
+    Ok(buf.into_inner())
+}
+
+/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), Error> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::new(path, "not a file name"))?;
+    let tmp = dir.join(format!(
+        ".{}.{}.tmp",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let result = (|| -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(Error::io(path, e));
+    }
+    Ok(())
+}
+
+/// Encodes by extension and writes atomically.
+pub fn write_image(path: &Path, image: &Image) -> Result<(), Error> {
+    let format = format_for(path)?;
+    let bytes = encode(image, format).map_err(|e| Error::new(path, e))?;
+    write_atomic(path, &bytes)
+}
+
+/// Checks before rendering that the output can be written: known extension, existing directory.
+pub fn check_output(path: &Path) -> Result<(), Error> {
+    format_for(path)?;
+    if let Some(d) = path.parent() {
+        if !d.as_os_str().is_empty() && !d.is_dir() {
+            return Err(Error::new(
+                path,
+                format!("the directory '{}' does not exist", d.display()),
+            ));
+        }
+    }
+    if path.is_dir() {
+        return Err(Error::new(path, "is a directory"));
+    }
+    Ok(())
+}

@@ -1,0 +1,48 @@
+//! # snell-io
+//!
+//! Everything that touches files: Snell's native TOML scene format, OBJ and PLY meshes, and
+//! PNG / EXR output. Every reader reports bad input as an [`Error`] naming the file and the
+//! line and column (text) or byte offset (binary) and what was wrong; nothing here panics on
+//! user input.
+
+mod error;
+pub mod image_out;
+pub mod obj;
+pub mod ply;
+pub mod scene;
+
+pub use error::{Error, Location};
+
+use std::path::Path;
+
+use snell_core::shape::Mesh;
+
+/// Reads a mesh by extension (`.obj` or `.ply`), validated and without degenerate-index faces.
+pub fn read_mesh(path: &Path) -> Result<Mesh, Error> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase());
+    let mut mesh = match ext.as_deref() {
+        Some("obj") => obj::read(path)?,
+        Some("ply") => ply::read(path)?,
+        _ => {
+            return Err(Error::new(
+                path,
+                "unsupported mesh format (expected .obj or .ply)",
+            ))
+        }
+    };
+    mesh.drop_degenerate_indices();
+    mesh.validate()
+        .map_err(|e| Error::new(path, e.to_string()))?;
+    if mesh.indices.is_empty() {
+        return Err(Error::new(path, "the mesh has no triangles"));
+    }
+    Ok(mesh)
+}
+
+/// Reads a whole file, mapping I/O errors to [`Error`].
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, Error> {
+    std::fs::read(path).map_err(|e| Error::io(path, e))
+}
