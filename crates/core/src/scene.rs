@@ -95,7 +95,9 @@ impl Scene {
             .fold(Aabb::EMPTY, |b, o| b.union(self.object_aabb(o)))
     }
 
-    fn object_aabb(&self, o: &Object) -> Aabb {
+    /// World-space box of an object: for a transformed object, the box of the 8 transformed
+    /// corners of its geometry's box.
+    pub fn object_aabb(&self, o: &Object) -> Aabb {
         let b = self.geometries[o.geometry].aabb();
         match &o.transform {
             Some(t) => t.aabb(&b),

@@ -257,7 +257,8 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, PErr> {
 
 trait Values {
     fn next(&mut self, ty: Scalar) -> Result<f64, PErr>;
-    fn location(&self) -> Location;
+    /// Where the next value starts.
+    fn location(&mut self) -> Location;
 }
 
 struct BinValues<'a> {
@@ -300,7 +301,7 @@ impl Values for BinValues<'_> {
         })
     }
 
-    fn location(&self) -> Location {
+    fn location(&mut self) -> Location {
         Location::Byte(self.pos as u64)
     }
 }
@@ -311,14 +312,20 @@ struct AsciiValues<'a> {
     line: usize,
 }
 
-impl Values for AsciiValues<'_> {
-    fn next(&mut self, ty: Scalar) -> Result<f64, PErr> {
+impl AsciiValues<'_> {
+    fn skip_space(&mut self) {
         while self.pos < self.text.len() && self.text[self.pos].is_ascii_whitespace() {
             if self.text[self.pos] == b'\n' {
                 self.line += 1;
             }
             self.pos += 1;
         }
+    }
+}
+
+impl Values for AsciiValues<'_> {
+    fn next(&mut self, ty: Scalar) -> Result<f64, PErr> {
+        self.skip_space();
         let start = self.pos;
         while self.pos < self.text.len() && !self.text[self.pos].is_ascii_whitespace() {
             self.pos += 1;
@@ -345,7 +352,8 @@ impl Values for AsciiValues<'_> {
         Ok(v)
     }
 
-    fn location(&self) -> Location {
+    fn location(&mut self) -> Location {
+        self.skip_space();
         Location::Line(self.line)
     }
 }

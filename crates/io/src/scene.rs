@@ -105,6 +105,39 @@ impl<'de> Deserialize<'de> for Color {
     }
 }
 
+/// A colour or a procedural texture: `[r, g, b]`, one number, or
+/// `{ checker = [colour, colour], scale = n }`.
+#[derive(Clone, Copy, Debug)]
+struct Tex(material::Texture);
+impl<'de> Deserialize<'de> for Tex {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Checker {
+            checker: [Color; 2],
+            scale: Option<f32>,
+        }
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum T {
+            C(Color),
+            Checker(Checker),
+        }
+        match T::deserialize(d).map_err(|_| {
+            serde::de::Error::custom("expected a colour ([r, g, b] or one number) or { checker = [colour, colour], scale = n }")
+        })? {
+            T::C(c) => Ok(Tex(material::Texture::Constant(c.0))),
+            T::Checker(c) => {
+                let scale = c.scale.unwrap_or(8.0);
+                if !(scale.is_finite() && scale > 0.0) {
+                    return Err(serde::de::Error::custom("a checker's scale must be a positive number"));
+                }
+                Ok(Tex(material::Texture::Checker { a: c.checker[0].0, b: c.checker[1].0, scale }))
+            }
+        }
+    }
+}
+
 /// A finite number in a range, checked by the newtype's constructor below.
 #[derive(Clone, Copy, Debug)]
 struct Num(f32);
@@ -212,7 +245,7 @@ struct CameraDef {
 struct MaterialDef {
     #[serde(rename = "type")]
     kind: Spanned<String>,
-    albedo: S<Color>,
+    albedo: S<Tex>,
     specular: S<Color>,
     roughness: S<Num>,
     ior: S<Ior>,
@@ -388,7 +421,7 @@ pub fn parse(src: &str, path: &Path) -> Result<LoadedScene, Error> {
     };
 
     let mut materials = vec![Material::Diffuse {
-        albedo: Rgb::splat(0.8),
+        albedo: Rgb::splat(0.8).into(),
     }];
     let mut material_ids: HashMap<&str, usize> = HashMap::new();
     for (name, def) in &file.materials {
@@ -562,6 +595,7 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
     let what = format!("a '{kind}' material");
     let color = |f: &S<Color>, d: Rgb| val(f).map_or(d, |c| c.0);
     let roughness = |d: f32| cx.num(&m.roughness, 0.0, 1.0, "roughness", d);
+    let tex = |d: Rgb| val(&m.albedo).map_or(material::Texture::Constant(d), |t| t.0);
     // Keys each type accepts; everything else is rejected with its position.
     let allowed: &[&str] = match kind {
         "diffuse" => &["albedo"],
@@ -608,10 +642,10 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
     };
     Ok(match kind {
         "diffuse" => Material::Diffuse {
-            albedo: color(&m.albedo, Rgb::splat(0.8)),
+            albedo: tex(Rgb::splat(0.8)),
         },
         "glossy" => Material::Glossy {
-            albedo: color(&m.albedo, Rgb::splat(0.5)),
+            albedo: tex(Rgb::splat(0.5)),
             specular: color(&m.specular, Rgb::ONE),
             roughness: roughness(0.2)?,
             ior: ior(1.5)?,
@@ -979,15 +1013,17 @@ pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
     let settings = SceneSettings::default();
     let materials = vec![
         Material::Glossy {
-            albedo: Rgb::new(0.72, 0.66, 0.58),
+            albedo: Rgb::new(0.72, 0.66, 0.58).into(),
             specular: Rgb::splat(0.5),
             roughness: 0.25,
             ior: 1.5,
         },
         Material::Diffuse {
-            albedo: Rgb::splat(0.5),
+            albedo: Rgb::splat(0.5).into(),
         },
-        Material::Diffuse { albedo: Rgb::ZERO },
+        Material::Diffuse {
+            albedo: Rgb::ZERO.into(),
+        },
     ];
     let floor_y = b.min.y;
     let s = 8.0 * r;

@@ -92,7 +92,7 @@ impl Whitted {
         }
         if material.has_direct() {
             l += self.direct(cx, &hit, &material, ng, ns, wo);
-            l += scene.ambient * material.diffuse_albedo();
+            l += scene.ambient * material.diffuse_albedo(hit.uv);
         }
         let cos_o = ns.dot(wo).clamp(0.0, 1.0);
         match material {
@@ -229,7 +229,7 @@ impl Whitted {
                 if ls.wi.dot(ng) <= 0.0 {
                     continue; // Light below the geometric surface.
                 }
-                let f = m.eval_direct(ns, wo, ls.wi);
+                let f = m.eval_direct(ns, wo, ls.wi, hit.uv);
                 if f.max_element() <= 0.0 || ls.value.max_element() <= 0.0 {
                     continue;
                 }

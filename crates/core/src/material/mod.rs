@@ -10,19 +10,54 @@ pub mod microfacet;
 
 use std::f32::consts::FRAC_1_PI;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use crate::Rgb;
+
+/// A colour that may vary over a surface, looked up by texture coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Texture {
+    Constant(Rgb),
+    /// Squares of `a` and `b`, `scale` squares per unit of `u` and of `v`.
+    Checker {
+        a: Rgb,
+        b: Rgb,
+        scale: f32,
+    },
+}
+
+impl Texture {
+    #[inline]
+    pub fn eval(&self, uv: Vec2) -> Rgb {
+        match *self {
+            Texture::Constant(c) => c,
+            Texture::Checker { a, b, scale } => {
+                let s = (uv * scale).floor();
+                if (s.x + s.y).rem_euclid(2.0) < 1.0 {
+                    a
+                } else {
+                    b
+                }
+            }
+        }
+    }
+}
+
+impl From<Rgb> for Texture {
+    fn from(c: Rgb) -> Texture {
+        Texture::Constant(c)
+    }
+}
 
 /// A surface material.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Material {
     /// Lambertian: `albedo / π`.
-    Diffuse { albedo: Rgb },
+    Diffuse { albedo: Texture },
     /// Lambertian base plus a rough specular highlight (GGX, Fresnel of a dielectric with
     /// index `ior`, scaled by `specular`) for direct light: a plastic-like surface.
     Glossy {
-        albedo: Rgb,
+        albedo: Texture,
         specular: Rgb,
         roughness: f32,
         ior: f32,
@@ -51,24 +86,25 @@ impl Material {
         }
     }
 
-    /// The diffuse albedo, for the ambient term.
-    pub fn diffuse_albedo(&self) -> Rgb {
+    /// The diffuse albedo at `uv`, for the ambient term.
+    pub fn diffuse_albedo(&self, uv: Vec2) -> Rgb {
         match self {
-            Material::Diffuse { albedo } | Material::Glossy { albedo, .. } => *albedo,
+            Material::Diffuse { albedo } | Material::Glossy { albedo, .. } => albedo.eval(uv),
             Material::Glazed { base, .. } => *base,
             _ => Rgb::ZERO,
         }
     }
 
     /// The non-delta BSDF times the cosine, `f(wo, wi) |n · wi|`, for light arriving from `wi`.
-    /// `n` is the shading normal on the side of `wo`. Zero if `wi` is below the surface.
-    pub fn eval_direct(&self, n: Vec3, wo: Vec3, wi: Vec3) -> Rgb {
+    /// `n` is the shading normal on the side of `wo`, `uv` the texture coordinates.
+    /// Zero if `wi` is below the surface.
+    pub fn eval_direct(&self, n: Vec3, wo: Vec3, wi: Vec3, uv: Vec2) -> Rgb {
         let cos_i = n.dot(wi);
         if cos_i <= 0.0 || n.dot(wo) <= 0.0 {
             return Rgb::ZERO;
         }
         match *self {
-            Material::Diffuse { albedo } => albedo * (FRAC_1_PI * cos_i),
+            Material::Diffuse { albedo } => albedo.eval(uv) * (FRAC_1_PI * cos_i),
             Material::Glossy {
                 albedo,
                 specular,
@@ -80,7 +116,7 @@ impl Material {
                 // The base sees only light the coat lets through, on the way in and out.
                 let t = (1.0 - fresnel::dielectric(cos_i, ior))
                     * (1.0 - fresnel::dielectric(n.dot(wo), ior));
-                (albedo * (FRAC_1_PI * t) + specular * (spec * f)) * cos_i
+                (albedo.eval(uv) * (FRAC_1_PI * t) + specular * (spec * f)) * cos_i
             }
             Material::Conductor { eta, k, roughness } => {
                 let (spec, cos_h) = microfacet::cook_torrance(n, wo, wi, roughness.max(1e-3));
@@ -168,18 +204,18 @@ mod tests {
     #[test]
     fn lambertian_is_albedo_over_pi_times_cosine() {
         let m = Material::Diffuse {
-            albedo: Rgb::splat(0.5),
+            albedo: Rgb::splat(0.5).into(),
         };
         let wi = Vec3::new(0.6, 0.0, 0.8);
-        let v = m.eval_direct(Vec3::Z, Vec3::Z, wi);
+        let v = m.eval_direct(Vec3::Z, Vec3::Z, wi, Vec2::ZERO);
         assert!((v.x - 0.5 * FRAC_1_PI * 0.8).abs() < 1e-7);
-        assert_eq!(m.eval_direct(Vec3::Z, Vec3::Z, -wi), Rgb::ZERO);
+        assert_eq!(m.eval_direct(Vec3::Z, Vec3::Z, -wi, Vec2::ZERO), Rgb::ZERO);
     }
 
     #[test]
     fn glossy_highlight_peaks_in_mirror_direction() {
         let m = Material::Glossy {
-            albedo: Rgb::ZERO,
+            albedo: Rgb::ZERO.into(),
             specular: Rgb::ONE,
             roughness: 0.1,
             ior: 1.5,
@@ -187,7 +223,10 @@ mod tests {
         let wo = Vec3::new(0.5, 0.0, 0.866).normalize();
         let mirror = fresnel::reflect(wo, Vec3::Z);
         let off = Vec3::new(-0.2, 0.3, 0.93).normalize();
-        assert!(m.eval_direct(Vec3::Z, wo, mirror).x > 10.0 * m.eval_direct(Vec3::Z, wo, off).x);
+        assert!(
+            m.eval_direct(Vec3::Z, wo, mirror, Vec2::ZERO).x
+                > 10.0 * m.eval_direct(Vec3::Z, wo, off, Vec2::ZERO).x
+        );
     }
 
     #[test]
@@ -195,7 +234,7 @@ mod tests {
         // Directional albedo ∫ f cos dω ≤ 1 by quadrature, for a few view angles.
         let mats = [
             Material::Glossy {
-                albedo: Rgb::ONE,
+                albedo: Rgb::ONE.into(),
                 specular: Rgb::ONE,
                 roughness: 0.3,
                 ior: 1.5,
@@ -222,13 +261,26 @@ mod tests {
                         let ph = (j as f32 + 0.5) / np as f32 * std::f32::consts::TAU;
                         let wi = Vec3::new(st * ph.cos(), st * ph.sin(), ct);
                         let dw = std::f32::consts::TAU / (nt * np) as f32;
-                        sum += (m.eval_direct(Vec3::Z, wo, wi).x * dw) as f64;
+                        sum += (m.eval_direct(Vec3::Z, wo, wi, Vec2::ZERO).x * dw) as f64;
                     }
                 }
                 assert!(sum <= 1.01, "{m:?} at {deg}°: albedo {sum}");
                 assert!(sum > 0.05, "{m:?} at {deg}°: albedo {sum}");
             }
         }
+    }
+
+    #[test]
+    fn checker_alternates() {
+        let t = Texture::Checker {
+            a: Rgb::ONE,
+            b: Rgb::ZERO,
+            scale: 4.0,
+        };
+        assert_eq!(t.eval(Vec2::new(0.1, 0.1)), Rgb::ONE);
+        assert_eq!(t.eval(Vec2::new(0.3, 0.1)), Rgb::ZERO);
+        assert_eq!(t.eval(Vec2::new(0.3, 0.3)), Rgb::ONE);
+        assert_eq!(t.eval(Vec2::new(-0.1, 0.1)), Rgb::ZERO);
     }
 
     #[test]

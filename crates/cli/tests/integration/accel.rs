@@ -1,0 +1,466 @@
+//! Acceleration structures against the brute-force oracle, through the whole two-level world
+//! (meshes, instances with transforms, spheres), plus watertightness and instance boxes.
+
+use glam::{Affine3A, Quat, Vec3};
+use snell_core::accel::{
+    Accel, AccelKind, AccelParams, AnyWorld, Brute, Bvh, BvhParams, SplitMethod,
+};
+use snell_core::camera::{Camera, Projection};
+use snell_core::geometry::{Ray, Transform};
+use snell_core::material::Material;
+use snell_core::sampling::Pcg32;
+use snell_core::scene::{Geometry, Object, Scene, World};
+use snell_core::shape::{Mesh, Sphere};
+use snell_core::Rgb;
+
+fn rand_vec(rng: &mut Pcg32, scale: f32) -> Vec3 {
+    Vec3::new(
+        rng.next_f32() - 0.5,
+        rng.next_f32() - 0.5,
+        rng.next_f32() - 0.5,
+    ) * (2.0 * scale)
+}
+
+fn object(geometry: usize, transform: Option<Transform>) -> Object {
+    Object {
+        geometry,
+        transform,
+        material: 0,
+        emission: Rgb::ZERO,
+        light_samples: 1,
+    }
+}
+
+pub fn scene_of(geometries: Vec<Geometry>, objects: Vec<Object>) -> Scene {
+    Scene {
+        geometries,
+        objects,
+        materials: vec![Material::Diffuse {
+            albedo: Rgb::ONE.into(),
+        }],
+        lights: vec![],
+        camera: Camera::look_at(
+            Vec3::Z,
+            Vec3::ZERO,
+            Vec3::Y,
+            Projection::Perspective { fov_y: 40.0 },
+        )
+        .unwrap(),
+        background: Rgb::ZERO,
+        ambient: Rgb::ZERO,
+    }
+}
+
+/// A random soup plus adversarial pieces: coplanar and axis-aligned triangles, zero-area
+/// triangles, a cluster of triangles in one point, huge coordinates, a cube and its instances,
+/// and spheres (one under a non-uniform scale).
+fn adversarial_scene(seed: u64) -> Scene {
+    let mut rng = Pcg32::new(seed, 7);
+    let mut soup = Mesh::default();
+    for _ in 0..300 {
+        let c = rand_vec(&mut rng, 4.0);
+        for _ in 0..3 {
+            soup.positions.push(c + rand_vec(&mut rng, 0.6));
+        }
+    }
+    // Coplanar, axis-aligned triangles in the plane z = 0.5.
+    for i in 0..20 {
+        let x = i as f32 * 0.2 - 2.0;
+        soup.positions.extend([
+            Vec3::new(x, -1.0, 0.5),
+            Vec3::new(x + 0.3, -1.0, 0.5),
+            Vec3::new(x, 1.0, 0.5),
+        ]);
+    }
+    // Zero-area triangles (a line and a point) and many triangles collapsed to one point.
+    soup.positions.extend([Vec3::ZERO, Vec3::X, Vec3::X * 2.0]);
+    soup.positions.extend([Vec3::ONE; 3]);
+    for _ in 0..20 {
+        soup.positions.extend([Vec3::splat(-1.5); 3]);
+    }
+    soup.indices = (0..soup.positions.len() as u32 / 3)
+        .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+        .collect();
+    let cube = Mesh::cuboid(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let huge = Mesh::quad(
+        Vec3::new(-1e6, -1e6, -20.0),
+        Vec3::new(2e6, 0.0, 0.0),
+        Vec3::new(0.0, 2e6, 0.0),
+    );
+    let geometries = vec![
+        Geometry::Mesh(soup),
+        Geometry::Mesh(cube),
+        Geometry::Sphere(Sphere {
+            center: Vec3::ZERO,
+            radius: 0.7,
+        }),
+        Geometry::Mesh(huge),
+    ];
+    let mut objects = vec![object(0, None), object(3, None)];
+    for i in 0..12 {
+        let m = Affine3A::from_scale_rotation_translation(
+            Vec3::new(
+                0.5 + rng.next_f32(),
+                0.5 + rng.next_f32(),
+                0.5 + rng.next_f32(),
+            ),
+            Quat::from_axis_angle(rand_vec(&mut rng, 1.0).normalize(), rng.next_f32() * 6.0),
+            rand_vec(&mut rng, 5.0),
+        );
+        objects.push(object(
+            if i % 3 == 0 { 2 } else { 1 },
+            Transform::try_new(m),
+        ));
+    }
+    objects.push(object(2, None));
+    scene_of(geometries, objects)
+}
+
+fn rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
+    let mut rng = Pcg32::new(seed, 3);
+    let b = scene.aabb();
+    let mut out = Vec::with_capacity(n);
+    for i in 0..n {
+        let o = rand_vec(&mut rng, 8.0);
+        let d = match i % 4 {
+            // Aimed at a random point near the origin: mostly hits.
+            0 | 1 => rand_vec(&mut rng, 3.0) - o,
+            // Axis-aligned directions, including ±0 components.
+            2 => [Vec3::X, -Vec3::Y, Vec3::Z, Vec3::new(-0.0, 0.0, -1.0)][(i / 4) % 4],
+            _ => rand_vec(&mut rng, 1.0),
+        };
+        let _ = b;
+        out.push(Ray::new(o, d));
+    }
+    // Rays starting inside boxes and along box faces.
+    out.push(Ray::new(Vec3::ZERO, Vec3::X));
+    out.push(Ray::new(Vec3::new(-0.5, 0.5, 3.0), -Vec3::Z));
+    out
+}
+
+fn scene_scale(scene: &Scene) -> f32 {
+    let b = scene.aabb();
+    b.min.abs().max(b.max.abs()).max_element()
+}
+
+fn check_against_brute<A: Accel>(name: &str, scene: &Scene, params: &A::Params, rays: &[Ray]) {
+    let oracle: World<Brute> = World::build(scene, &AccelParams::default());
+    let world: World<A> = World::build(scene, params);
+    let mut hits = 0;
+    for (i, r) in rays.iter().enumerate() {
+        let a = oracle.intersect(r, f32::INFINITY);
+        let b = world.intersect(r, f32::INFINITY);
+        match (a, b) {
+            (None, None) => {}
+            (Some(a), Some(b)) => {
+                hits += 1;
+                let tol = 1e-5 * a.t.max(1.0);
+                assert!(
+                    (a.t - b.t).abs() <= tol,
+                    "{name} ray {i}: t {} vs brute {}",
+                    b.t,
+                    a.t
+                );
+                // Same object unless two surfaces are hit at the same distance (a tie).
+                if a.object != b.object {
+                    assert!(
+                        (a.t - b.t).abs() <= tol,
+                        "{name} ray {i}: object {} vs brute {}",
+                        b.object,
+                        a.object
+                    );
+                }
+                // Any hit agrees with closest hit. The margin covers the triangle test's own
+                // error, which grows with the coordinates (the ±1e6 quad reports t to ~1e-3).
+                let margin = a.t * 1e-3 + 1e-6 * scene_scale(scene);
+                assert!(
+                    world.occluded(r, a.t + margin),
+                    "{name} ray {i}: occluded misses the closest hit"
+                );
+                assert!(
+                    !world.occluded(r, a.t * 0.999),
+                    "{name} ray {i}: occluded before the closest hit"
+                );
+            }
+            (a, b) => panic!(
+                "{name} ray {i} {r:?}: brute {:?} vs {:?}",
+                a.map(|h| h.t),
+                b.map(|h| h.t)
+            ),
+        }
+        assert_eq!(
+            world.occluded(r, f32::INFINITY),
+            a.is_some(),
+            "{name} ray {i}: occluded(inf)"
+        );
+    }
+    assert!(
+        hits > rays.len() / 3,
+        "{name}: only {hits} of {} rays hit; the test is too easy",
+        rays.len()
+    );
+}
+
+#[test]
+fn every_bvh_matches_brute_force_on_an_adversarial_scene() {
+    for seed in [1, 2] {
+        let scene = adversarial_scene(seed);
+        let rays = rays(&scene, 3000, seed);
+        for split in [SplitMethod::Center, SplitMethod::Median, SplitMethod::Sah] {
+            for max_leaf_prims in [1, 4] {
+                let params = BvhParams {
+                    split,
+                    base: AccelParams {
+                        max_leaf_prims,
+                        ..AccelParams::default()
+                    },
+                };
+                check_against_brute::<Bvh>(
+                    &format!("{split:?}/{max_leaf_prims}"),
+                    &scene,
+                    &params,
+                    &rays,
+                );
+            }
+        }
+        // A depth limit that forces big leaves.
+        let params = BvhParams {
+            split: SplitMethod::Sah,
+            base: AccelParams {
+                max_depth: 3,
+                ..AccelParams::default()
+            },
+        };
+        check_against_brute::<Bvh>("sah/depth3", &scene, &params, &rays);
+    }
+}
+
+#[test]
+fn empty_and_single_primitive_scenes() {
+    let empty = scene_of(vec![], vec![]);
+    for kind in AccelKind::ALL {
+        let w = kind.build_world(&empty, &AccelParams::default());
+        let r = Ray::new(Vec3::ZERO, Vec3::X);
+        snell_core::with_world!(&w, w => {
+            assert!(w.intersect(&r, f32::INFINITY).is_none());
+            assert!(!w.occluded(&r, f32::INFINITY));
+        });
+    }
+    let one = Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+        normals: None,
+        uvs: None,
+        indices: vec![[0, 1, 2]],
+    };
+    let scene = scene_of(vec![Geometry::Mesh(one)], vec![object(0, None)]);
+    let r = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z);
+    for kind in AccelKind::ALL {
+        let w = kind.build_world(&scene, &AccelParams::default());
+        let hit = snell_core::with_world!(&w, w => w.intersect(&r, f32::INFINITY));
+        assert!((hit.unwrap().t - 1.0).abs() < 1e-6, "{kind}");
+        assert!(matches!(w, AnyWorld::Brute(_) | AnyWorld::Bvh(_)));
+    }
+}
+
+#[test]
+fn bvh_statistics_are_sane() {
+    let scene = adversarial_scene(3);
+    let params = BvhParams {
+        split: SplitMethod::Sah,
+        base: AccelParams::default(),
+    };
+    let world: World<Bvh> = World::build(&scene, &params);
+    let (_, blas) = world.structures();
+    let soup = blas[0].as_ref().unwrap().stats();
+    let Geometry::Mesh(m) = &scene.geometries[0] else {
+        unreachable!()
+    };
+    // Every non-degenerate-box triangle is referenced exactly once (a BVH never duplicates).
+    assert_eq!(soup.prim_refs, m.indices.len());
+    assert_eq!(soup.nodes, 2 * soup.leaves - 1);
+    assert!(soup.max_depth <= 24);
+    assert!(soup.sah_cost > 1.0 && soup.sah_cost < m.indices.len() as f32);
+}
+
+/// An icosphere: closed, every edge shared by two triangles, every vertex by five or six.
+pub fn icosphere(subdiv: u32) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut p: Vec<Vec3> = [
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
+    ]
+    .iter()
+    .map(|v| Vec3::from(*v).normalize())
+    .collect();
+    let mut f: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdiv {
+        let mut cache = std::collections::HashMap::new();
+        let mut mid = |a: u32, b: u32, p: &mut Vec<Vec3>| -> u32 {
+            *cache.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
+                p.len() as u32 - 1
+            })
+        };
+        f = f
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let (ab, bc, ca) = (mid(a, b, &mut p), mid(b, c, &mut p), mid(c, a, &mut p));
+                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+            })
+            .collect();
+    }
+    // Non-round coordinates make the edge and vertex cases hard.
+    let p = p
+        .iter()
+        .map(|v| *v * 1.37 + Vec3::new(0.1, -0.3, 0.7))
+        .collect();
+    Mesh {
+        positions: p,
+        normals: None,
+        uvs: None,
+        indices: f,
+    }
+}
+
+/// Rays that cross the surface exactly at every vertex and every edge midpoint of `mesh` must
+/// hit it at or before that point: those are the rays that slip through shared edges and
+/// vertices with a non-watertight test. Each ray arrives along the local inward normal (the
+/// mean of the adjacent face normals), so it enters the surface there rather than grazing it.
+/// Also rays from an interior point `inside` (if given) must hit the closed surface.
+pub fn assert_watertight(mesh: &Mesh, inside: Option<Vec3>) -> usize {
+    let scene = scene_of(vec![Geometry::Mesh(mesh.clone())], vec![object(0, None)]);
+    let params = BvhParams {
+        split: SplitMethod::Sah,
+        base: AccelParams::default(),
+    };
+    let world: World<Bvh> = World::build(&scene, &params);
+    let dist = mesh.aabb().extent().length() * 2.0;
+    let face_n: Vec<Vec3> = (0..mesh.indices.len())
+        .map(|i| {
+            let [a, b, c] = mesh.triangle(i);
+            (b - a).cross(c - a).normalize_or_zero()
+        })
+        .collect();
+    let mut vertex_n = vec![Vec3::ZERO; mesh.positions.len()];
+    let mut edges: std::collections::HashMap<(u32, u32), Vec3> = std::collections::HashMap::new();
+    for (t, n) in mesh.indices.iter().zip(&face_n) {
+        for k in 0..3 {
+            vertex_n[t[k] as usize] += *n;
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += *n;
+        }
+    }
+    let mut targets: Vec<(Vec3, Vec3)> = mesh.positions.iter().copied().zip(vertex_n).collect();
+    for ((a, b), n) in edges {
+        targets.push((
+            (mesh.positions[a as usize] + mesh.positions[b as usize]) * 0.5,
+            n,
+        ));
+    }
+    let mut tested = 0;
+    for (i, &(q, n)) in targets.iter().enumerate() {
+        let Some(n) = n.try_normalize() else { continue };
+        let o = q + n * dist;
+        let r = Ray::new(o, q - o);
+        let hit = world.intersect(&r, f32::INFINITY);
+        assert!(
+            hit.is_some_and(|h| h.t <= 1.0 + 1e-4),
+            "ray {i} slipped through the surface at {q}"
+        );
+        assert!(
+            world.occluded(&r, 1.0 + 1e-4),
+            "any-hit ray {i} slipped through the surface at {q}"
+        );
+        if let Some(c) = inside {
+            let r = Ray::new(c, q - c);
+            assert!(
+                world.intersect(&r, 2.0).is_some(),
+                "ray {i} from inside escaped through {q}"
+            );
+            assert!(
+                world.occluded(&r, 2.0),
+                "any-hit ray {i} from inside escaped through {q}"
+            );
+        }
+        tested += 1;
+    }
+    tested
+}
+
+#[test]
+fn watertight_closed_mesh_never_lets_rays_slip_through() {
+    let m = icosphere(3);
+    let n = assert_watertight(
+        &m,
+        Some(Vec3::new(0.1, -0.3, 0.7) + Vec3::new(0.013, 0.021, -0.017)),
+    );
+    assert!(n > 2000);
+}
+
+#[test]
+fn instance_boxes_contain_every_transformed_vertex() {
+    let scene = adversarial_scene(4);
+    for o in &scene.objects {
+        let Some(t) = &o.transform else { continue };
+        let b = scene.object_aabb(o);
+        match &scene.geometries[o.geometry] {
+            Geometry::Mesh(m) => {
+                for p in &m.positions {
+                    assert!(
+                        b.contains(t.point(*p)),
+                        "vertex {p} escapes its instance box"
+                    );
+                }
+            }
+            Geometry::Sphere(s) => {
+                for i in 0..200 {
+                    let th = i as f32 * 0.1;
+                    let d = Vec3::new(
+                        th.cos() * (i as f32 * 0.37).sin(),
+                        th.sin(),
+                        (i as f32 * 0.61).cos(),
+                    )
+                    .normalize();
+                    assert!(b.contains(t.point(s.center + d * s.radius)));
+                }
+            }
+        }
+        // The box of the 8 transformed corners, no larger.
+        let g = scene.geometries[o.geometry].aabb();
+        assert_eq!(
+            b,
+            snell_core::geometry::Aabb::from_points(g.corners().map(|c| t.point(c)))
+        );
+    }
+}

@@ -1,0 +1,48 @@
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn snell() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_snell"))
+}
+
+pub fn run(args: &[&str], dir: &Path) -> Output {
+    snell()
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("failed to start snell")
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The shared test data, from `SNELL_SCENES`. `None` (with a note) when the variable is not
+/// set; a panic when it is set but the file is missing, so CI fails loudly.
+pub fn shared_scene(rel: &str) -> Option<PathBuf> {
+    let Ok(root) = std::env::var("SNELL_SCENES") else {
+        eprintln!("SNELL_SCENES is not set: skipping the test that needs {rel}");
+        return None;
+    };
+    let p = Path::new(&root).join(rel);
+    assert!(
+        p.is_file(),
+        "SNELL_SCENES={root} is set but {} is missing",
+        p.display()
+    );
+    Some(p)
+}
+
+/// Path of a file in `crates/cli/tests/data`.
+pub fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// Path of a scene in the repository's `scenes/` directory.
+pub fn repo_scene(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenes")
+        .join(name)
+}

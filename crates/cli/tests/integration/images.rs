@@ -1,0 +1,404 @@
+//! Whole renders: determinism across thread counts, analytic radiometry, the ray tree's energy
+//! balance, pruning statistics, and small golden images.
+
+use std::path::{Path, PathBuf};
+
+use snell_core::accel::AccelParams;
+use snell_core::image::Image;
+use snell_core::integrator::{RayStats, Whitted};
+use snell_core::render::{render, RenderSettings};
+use snell_core::with_world;
+use snell_io::scene::LoadedScene;
+
+use crate::common::{repo_scene, run, stderr};
+
+pub struct Opts {
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub threads: usize,
+    pub max_depth: Option<u32>,
+    pub min_attenuation: Option<f32>,
+}
+
+impl Default for Opts {
+    fn default() -> Self {
+        Opts {
+            width: 32,
+            height: 32,
+            spp: 4,
+            threads: 0,
+            max_depth: None,
+            min_attenuation: None,
+        }
+    }
+}
+
+pub fn render_loaded(l: &LoadedScene, o: &Opts) -> (Image, RayStats) {
+    let mut scene = l.scene.clone();
+    if let Some(c) = l
+        .frame
+        .and_then(|b| snell_io::scene::auto_camera(b, o.width, o.height))
+    {
+        scene.camera = c;
+    }
+    let settings = RenderSettings {
+        width: o.width,
+        height: o.height,
+        spp: o.spp,
+        seed: l.settings.seed,
+        threads: o.threads,
+        filter: l.settings.filter.clone(),
+    };
+    let integrator = Whitted {
+        max_depth: o.max_depth.unwrap_or(l.settings.max_depth),
+        min_attenuation: o.min_attenuation.unwrap_or(l.settings.min_attenuation),
+    };
+    let world = l
+        .settings
+        .accel
+        .build_world(&scene, &AccelParams::default());
+    with_world!(&world, w => render(w, &integrator, &settings, &|_| {}))
+}
+
+fn render_src(src: &str, o: &Opts) -> (Image, RayStats) {
+    let l = snell_io::scene::parse(src, Path::new("test.toml")).unwrap_or_else(|e| panic!("{e}"));
+    render_loaded(&l, o)
+}
+
+#[test]
+fn image_is_bit_identical_with_one_and_two_threads() {
+    let l = snell_io::scene::load(&repo_scene("default.toml")).unwrap();
+    let o1 = Opts {
+        width: 40,
+        height: 30,
+        spp: 4,
+        threads: 1,
+        ..Opts::default()
+    };
+    let o2 = Opts { threads: 2, ..o1 };
+    let (a, sa) = render_loaded(&l, &o1);
+    let (b, sb) = render_loaded(&l, &o2);
+    let bits = |i: &Image| {
+        i.pixels
+            .iter()
+            .flat_map(|p| p.to_array().map(f32::to_bits))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(bits(&a), bits(&b));
+    assert_eq!(sa, sb);
+    // And the seed does change it.
+    let mut l2 = l.clone();
+    l2.settings.seed = 1;
+    let (c, _) = render_loaded(&l2, &o1);
+    assert_ne!(bits(&a), bits(&c));
+}
+
+#[test]
+fn cli_output_is_identical_across_thread_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let common = ["render", "--width", "24", "--height", "16", "--spp", "2"];
+    let a = run(
+        &[&common[..], &["-o", "a.exr", "--threads", "1"]].concat(),
+        dir.path(),
+    );
+    let b = run(
+        &[&common[..], &["-o", "b.exr", "--threads", "2"]].concat(),
+        dir.path(),
+    );
+    assert!(
+        a.status.success() && b.status.success(),
+        "{}{}",
+        stderr(&a),
+        stderr(&b)
+    );
+    let ra = image::open(dir.path().join("a.exr")).unwrap().to_rgb32f();
+    let rb = image::open(dir.path().join("b.exr")).unwrap().to_rgb32f();
+    assert_eq!(ra.as_raw(), rb.as_raw());
+    // The summary line reports time and throughput.
+    let out = String::from_utf8_lossy(&a.stdout);
+    assert!(
+        out.contains("Mrays/s") && out.contains("camera rays"),
+        "{out}"
+    );
+}
+
+const PLANE: &str = r#"
+[render]
+filter = "box"
+[camera]
+type = "orthographic"
+eye = [0, 0, 5]
+look_at = [0, 0, 0]
+scale = 0.5
+[materials.m]
+type = "diffuse"
+albedo = 0.5
+[[shapes]]
+type = "quad"
+corner = [-10, -10, 0]
+edge1 = [20, 0, 0]
+edge2 = [0, 20, 0]
+material = "m"
+"#;
+
+#[test]
+fn diffuse_plane_under_directional_light_is_albedo_times_e_over_pi() {
+    // Light arriving at 60° from the normal: E·cos 60° = 1.
+    let src = format!(
+        "{PLANE}[[lights]]\ntype = \"directional\"\ndirection = [0, {}, -0.5]\nirradiance = 2\n",
+        -(0.75f32).sqrt()
+    );
+    let (img, stats) = render_src(&src, &Opts::default());
+    let expect = 0.5 * 1.0 / std::f32::consts::PI;
+    for p in &img.pixels {
+        assert!(
+            (p.x - expect).abs() < 1e-5 && (p.z - expect).abs() < 1e-5,
+            "{p} vs {expect}"
+        );
+    }
+    assert_eq!(stats.shadow, stats.camera);
+}
+
+#[test]
+fn point_light_falls_off_with_inverse_square() {
+    let src = format!("{PLANE}[[lights]]\ntype = \"point\"\nposition = [0, 0, 2]\nintensity = 8\n");
+    let (img, _) = render_src(
+        &src,
+        &Opts {
+            width: 33,
+            height: 33,
+            ..Opts::default()
+        },
+    );
+    // Centre pixel: L = albedo/π · I/d² · cos θ (θ ≈ 0); the pixel spans ±1/66 in x and y.
+    let expect = 0.5 / std::f32::consts::PI * 8.0 / 4.0;
+    let c = img.get(16, 16).x;
+    assert!((c - expect).abs() < 2e-3 * expect, "{c} vs {expect}");
+    // Edge pixel, at x = 0.5 - 1/66: cos θ / d² with d² = 4 + x².
+    let x = 0.5 - 1.0 / 66.0;
+    let d2 = 4.0 + x * x;
+    let expect = 0.5 / std::f32::consts::PI * 8.0 / d2 * (2.0 / d2.sqrt());
+    let e = img.get(32, 16).x;
+    assert!((e - expect).abs() < 1e-2 * expect, "{e} vs {expect}");
+}
+
+#[test]
+fn area_light_soft_shadow_is_partial() {
+    // A sphere between a quad light and the plane casts umbra and penumbra.
+    let src = format!(
+        "{PLANE}[[shapes]]\ntype = \"quad\"\ncorner = [-0.5, -0.5, 3]\nedge1 = [0, 1, 0]\nedge2 = [1, 0, 0]\nemission = 5\nlight_samples = 64\n\
+         [[shapes]]\ntype = \"sphere\"\ncenter = [0, 0, 1.5]\nradius = 0.25\n"
+    )
+    .replace("eye = [0, 0, 5]", "eye = [0, 0, 1]")
+    .replace("scale = 0.5", "scale = 1.5");
+    let (img, _) = render_src(
+        &src,
+        &Opts {
+            width: 64,
+            height: 64,
+            spp: 1,
+            ..Opts::default()
+        },
+    );
+    let v: Vec<f32> = (0..64).map(|x| img.get(x, 32).x).collect();
+    let max = v.iter().cloned().fold(0.0, f32::max);
+    let centre = v[32];
+    let partial = v
+        .iter()
+        .filter(|&&x| x > 0.1 * max && x < 0.9 * max)
+        .count();
+    assert!(
+        centre < 0.5 * max,
+        "no shadow under the sphere: {centre} vs {max}"
+    );
+    assert!(partial >= 6, "no penumbra: {v:?}");
+}
+
+/// Glass in a uniform white environment: every path ends in the environment, and Fresnel
+/// splits energy without loss (R + T = 1, the 1/η² radiance scaling cancels on the way out),
+/// so with no pruning the image is white everywhere, to the precision of the deepest branches.
+#[test]
+fn glass_in_a_white_furnace_is_invisible() {
+    for shape in [
+        "type = \"sphere\"\nradius = 1",
+        "type = \"box\"\nmin = [-0.7, -0.7, -0.7]\nmax = [0.7, 0.7, 0.7]\ntransform = [{ rotate = { axis = [1, 1, 0], angle = 30 } }]",
+    ] {
+        for ior in ["1.33", "1.5", "2.42"] {
+            let src = format!(
+                "[render]\nbackground = 1\n[camera]\neye = [0, 0, 4]\nfov = 40\n[materials.g]\ntype = \"dielectric\"\nior = {ior}\n[[shapes]]\n{shape}\nmaterial = \"g\"\n"
+            );
+            let o = Opts { max_depth: Some(60), min_attenuation: Some(0.0), ..Opts::default() };
+            let (img, stats) = render_src(&src, &o);
+            for p in &img.pixels {
+                assert!((p.x - 1.0).abs() < 2e-3, "{shape} ior {ior}: pixel {p}");
+            }
+            assert!(stats.refraction > 0 && stats.reflection > 0);
+            if shape.contains("box") {
+                assert!(stats.total_internal_reflections > 0, "a glass cube shows TIR");
+            } else {
+                // A ray refracted into a sphere meets the surface at its entry angle: no TIR.
+                assert_eq!(stats.total_internal_reflections, 0);
+            }
+        }
+    }
+}
+
+#[test]
+fn constant_mirror_and_fresnel_conductor() {
+    let src = "[render]\nbackground = 1\nfilter = \"box\"\n[camera]\neye = [0, 0, 4]\nfov = 5\n[materials.m]\ntype = \"mirror\"\nreflectance = 0.5\n[[shapes]]\ntype = \"sphere\"\nmaterial = \"m\"\n";
+    let (img, _) = render_src(src, &Opts::default());
+    assert!(img.pixels.iter().all(|p| (p.x - 0.5).abs() < 1e-6));
+    // Gold at (nearly) normal incidence reflects its R0 per channel.
+    let src = src.replace(
+        "type = \"mirror\"\nreflectance = 0.5",
+        "type = \"conductor\"\nmetal = \"gold\"",
+    );
+    let (img, _) = render_src(&src, &Opts::default());
+    let (eta, k) = snell_core::material::metal("gold").unwrap();
+    let r0 = snell_core::material::conductor_fresnel(1.0, eta, k);
+    let c = img.get(16, 16);
+    assert!((c - r0).abs().max_element() < 1e-3, "{c} vs {r0}");
+}
+
+#[test]
+fn ray_tree_is_pruned_by_depth_and_attenuation() {
+    let src = std::fs::read_to_string(repo_scene("ray-tree.toml")).unwrap();
+    let mut prev = 0;
+    for depth in [1u32, 2, 5, 10] {
+        let o = Opts {
+            max_depth: Some(depth),
+            min_attenuation: Some(0.0),
+            spp: 1,
+            ..Opts::default()
+        };
+        let (_, s) = render_src(&src, &o);
+        let secondary = s.reflection + s.refraction;
+        assert!(
+            secondary > prev,
+            "depth {depth}: {secondary} secondary rays, not more than {prev}"
+        );
+        assert!(s.pruned_depth > 0, "depth {depth}: nothing pruned by depth");
+        assert_eq!(s.pruned_attenuation, 0);
+        prev = secondary;
+    }
+    // Depth 0: camera and shadow rays only.
+    let (_, s) = render_src(
+        &src,
+        &Opts {
+            max_depth: Some(0),
+            spp: 1,
+            ..Opts::default()
+        },
+    );
+    assert_eq!(s.reflection + s.refraction, 0);
+    // A high attenuation limit cuts branches that depth alone would trace.
+    let o = Opts {
+        max_depth: Some(10),
+        min_attenuation: Some(0.3),
+        spp: 1,
+        ..Opts::default()
+    };
+    let (_, s) = render_src(&src, &o);
+    assert!(s.pruned_attenuation > 0);
+}
+
+#[test]
+fn bare_mesh_renders_with_automatic_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = crate::common::data("tetra.obj");
+    let o = run(
+        &[
+            "render",
+            obj.to_str().unwrap(),
+            "-o",
+            "m.png",
+            "--width",
+            "40",
+            "--height",
+            "30",
+            "--spp",
+            "2",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(dir.path().join("m.png")).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (40, 30));
+    // The mesh is framed: the centre pixel differs from the background in the corner.
+    let (c, corner) = (img.get_pixel(20, 15), img.get_pixel(0, 0));
+    assert_ne!(c, corner);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Golden images: small renders of the example scenes, compared with images in
+// `tests/golden`. `SNELL_BLESS=1 cargo test golden` rewrites them (check the diff by eye).
+
+fn golden_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden")
+}
+
+fn check_golden(name: &str, img: &Image) {
+    let path = golden_dir().join(format!("{name}.exr"));
+    if std::env::var_os("SNELL_BLESS").is_some() {
+        snell_io::image_out::write_image(&path, img).unwrap();
+        return;
+    }
+    let gold = image::open(&path)
+        .unwrap_or_else(|e| panic!("{}: {e} (bless with SNELL_BLESS=1)", path.display()))
+        .to_rgb32f();
+    assert_eq!(gold.dimensions(), (img.width, img.height), "{name}: size");
+    let mut sum = 0.0f64;
+    let mut max = 0.0f32;
+    for (a, b) in img.pixels.iter().zip(gold.pixels()) {
+        let d = (*a - glam::Vec3::from(b.0)).abs().max_element();
+        sum += d as f64;
+        max = max.max(d);
+    }
+    let mean = sum / img.pixels.len() as f64;
+    if mean > 1e-4 || max > 2e-2 {
+        let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("golden-{name}"));
+        let _ = std::fs::create_dir_all(&out);
+        let _ = snell_io::image_out::write_image(&out.join("actual.exr"), img);
+        let diff = Image {
+            width: img.width,
+            height: img.height,
+            pixels: img
+                .pixels
+                .iter()
+                .zip(gold.pixels())
+                .map(|(a, b)| (*a - glam::Vec3::from(b.0)).abs() * 10.0)
+                .collect(),
+        };
+        let _ = snell_io::image_out::write_image(&out.join("diff-x10.png"), &diff);
+        panic!(
+            "{name}: mean abs difference {mean:.2e}, max {max:.2e}; actual and diff in {}",
+            out.display()
+        );
+    }
+}
+
+#[test]
+fn golden_images_of_the_example_scenes() {
+    for name in [
+        "default",
+        "ior-row",
+        "fresnel-vs-constant",
+        "total-internal-reflection",
+        "glazed",
+        "ray-tree",
+    ] {
+        let l = snell_io::scene::load(&repo_scene(&format!("{name}.toml")))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let (img, _) = render_loaded(
+            &l,
+            &Opts {
+                width: 64,
+                height: 48,
+                spp: 4,
+                ..Opts::default()
+            },
+        );
+        check_golden(name, &img);
+    }
+}

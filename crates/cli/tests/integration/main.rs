@@ -1,0 +1,7 @@
+//! All integration tests, compiled into one test binary.
+
+mod accel;
+mod bad_input;
+mod common;
+mod images;
+mod shared_scenes;

@@ -1,0 +1,149 @@
+//! Tests on the shared real meshes (`SNELL_SCENES`, set by `.ci/run`).
+
+use glam::Vec3;
+use snell_core::accel::{AccelParams, Brute, Bvh, BvhParams, SplitMethod};
+use snell_core::geometry::Ray;
+use snell_core::scene::{Geometry, Object, World};
+use snell_core::Rgb;
+
+use crate::accel::{assert_watertight, scene_of};
+use crate::common::{run, shared_scene, stderr};
+
+#[test]
+fn bunny_obj_and_ply_give_identical_geometry() {
+    let (Some(obj), Some(ply)) = (
+        shared_scene("stanford/bunny.obj"),
+        shared_scene("stanford/bunny.ply"),
+    ) else {
+        return;
+    };
+    let a = snell_io::read_mesh(&obj).unwrap();
+    let b = snell_io::read_mesh(&ply).unwrap();
+    assert_eq!(a.indices.len(), 69_451);
+    assert_eq!(a.indices.len(), b.indices.len());
+    // The OBJ prints 6 significant digits, so positions agree to about 1e-7 (coordinates ~0.1).
+    let close = |p: Vec3, q: Vec3| (p - q).abs().max_element() <= 1e-6;
+    assert!(close(a.aabb().min, b.aabb().min) && close(a.aabb().max, b.aabb().max));
+    // Triangle by triangle, the same corners (the OBJ keeps the PLY's face order).
+    let mismatches = (0..a.indices.len())
+        .filter(|&i| {
+            !a.triangle(i)
+                .iter()
+                .zip(b.triangle(i))
+                .all(|(p, q)| close(*p, q))
+        })
+        .count();
+    assert_eq!(mismatches, 0);
+}
+
+#[test]
+fn dragon_loads_with_every_triangle() {
+    let Some(p) = shared_scene("stanford/dragon_vrip_res4.ply") else {
+        return;
+    };
+    let m = snell_io::read_mesh(&p).unwrap();
+    assert!(
+        m.indices.len() >= 11_000 && m.indices.len() <= 11_102,
+        "{}",
+        m.indices.len()
+    );
+    let b = m.aabb();
+    assert!(
+        (b.min - Vec3::new(-0.1076, 0.0528, -0.0498))
+            .abs()
+            .max_element()
+            < 1e-4,
+        "{b:?}"
+    );
+}
+
+#[test]
+fn bvh_matches_brute_force_on_the_bunny() {
+    let Some(p) = shared_scene("stanford/bunny.ply") else {
+        return;
+    };
+    let mesh = snell_io::read_mesh(&p).unwrap();
+    let b = mesh.aabb();
+    let scene = scene_of(
+        vec![Geometry::Mesh(mesh)],
+        vec![Object {
+            geometry: 0,
+            transform: None,
+            material: 0,
+            emission: Rgb::ZERO,
+            light_samples: 1,
+        }],
+    );
+    let brute: World<Brute> = World::build(&scene, &AccelParams::default());
+    let bvh: World<Bvh> = World::build(
+        &scene,
+        &BvhParams {
+            split: SplitMethod::Sah,
+            base: AccelParams::default(),
+        },
+    );
+    // The benchmark's camera, on a coarse grid of pixels.
+    let c = b.center();
+    let r = b.extent().length() * 0.5;
+    let eye = c + Vec3::new(0.3, 0.4, 1.0).normalize() * (0.8 * r / 20f32.to_radians().tan());
+    let cam = snell_core::camera::Camera::look_at(
+        eye,
+        c,
+        Vec3::Y,
+        snell_core::camera::Projection::Perspective { fov_y: 40.0 },
+    )
+    .unwrap();
+    let mut hits = 0;
+    for y in 0..16 {
+        for x in 0..16 {
+            let ray: Ray = cam.ray(
+                glam::Vec2::new(x as f32 * 64.0 + 32.0, y as f32 * 64.0 + 32.0),
+                1024,
+                1024,
+                glam::Vec2::ZERO,
+            );
+            let a = brute.intersect(&ray, f32::INFINITY);
+            let h = bvh.intersect(&ray, f32::INFINITY);
+            assert_eq!(a.is_some(), h.is_some(), "pixel {x},{y}");
+            if let (Some(a), Some(h)) = (a, h) {
+                assert!((a.t - h.t).abs() < 1e-6 * a.t.max(1.0));
+                hits += 1;
+            }
+        }
+    }
+    assert!(hits > 40, "{hits}");
+}
+
+#[test]
+fn spot_is_watertight() {
+    let Some(p) = shared_scene("misc/spot.obj") else {
+        return;
+    };
+    let m = snell_io::read_mesh(&p).unwrap();
+    assert!(assert_watertight(&m, None) > 10_000);
+}
+
+#[test]
+fn bunny_renders_as_a_bare_mesh() {
+    let Some(p) = shared_scene("stanford/bunny.ply") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let o = run(
+        &[
+            "render",
+            p.to_str().unwrap(),
+            "-o",
+            "bunny.png",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--spp",
+            "1",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.path().join("bunny.png").is_file());
+}
