@@ -211,7 +211,7 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, PErr> {
                 .map(|p| p.list.map_or(p.ty.size(), |c| c.size()))
                 .sum()
         };
-        let need = el.count.checked_mul(per).unwrap_or(u64::MAX);
+        let need = el.count.saturating_mul(per);
         if need > body {
             return Err((
                 None,

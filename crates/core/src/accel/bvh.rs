@@ -133,6 +133,7 @@ impl Builder<'_> {
         mid
     }
 
+    #[allow(clippy::needless_range_loop)]
     fn sah_partition(&self, prims: &mut [u32], bounds: &Aabb, cbounds: &Aabb) -> usize {
         let c = &self.centroids;
         let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, bins on the left
