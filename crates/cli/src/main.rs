@@ -132,6 +132,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         threads: args.threads.unwrap_or(0) as usize,
         filter: s.filter,
     };
+    settings.check().map_err(anyhow::Error::msg)?;
     let integrator = Whitted {
         max_depth: args.max_depth.unwrap_or(s.max_depth),
         min_attenuation: args.min_attenuation.unwrap_or(s.min_attenuation),

@@ -39,6 +39,33 @@ impl Default for RenderSettings {
     }
 }
 
+/// The largest image [`RenderSettings::check`] accepts: 2^28 pixels (3 GiB of float RGB).
+pub const MAX_PIXELS: u64 = 1 << 28;
+
+impl RenderSettings {
+    /// Rejects settings that cannot be rendered: a zero-sized image, one too large to hold in
+    /// memory, or zero samples.
+    pub fn check(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 {
+            return Err(format!(
+                "the image is {}x{} pixels; both sizes must be at least 1",
+                self.width, self.height
+            ));
+        }
+        let pixels = self.width as u64 * self.height as u64;
+        if pixels > MAX_PIXELS {
+            return Err(format!(
+                "the image is {}x{} = {pixels} pixels; at most {MAX_PIXELS} are supported",
+                self.width, self.height
+            ));
+        }
+        if self.spp == 0 {
+            return Err("the sample count must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
 const TILE: u32 = 16;
 
 /// Renders the world. `progress(pixels)` is called as tiles finish (from worker threads).

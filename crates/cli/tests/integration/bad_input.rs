@@ -295,6 +295,24 @@ fn zero_sized_image() {
 }
 
 #[test]
+fn image_too_large_to_allocate() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = run(
+        &[
+            "render", "--width", "65536", "--height", "65536", "-o", "out.png",
+        ],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("65536x65536") && stderr(&o).contains("at most"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.path().join("out.png").exists());
+}
+
+#[test]
 fn zero_size_on_the_command_line_is_misuse() {
     let dir = tempfile::tempdir().unwrap();
     let o = crate::common::run(&["render", "--width", "0", "-o", "out.png"], dir.path());
