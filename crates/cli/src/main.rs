@@ -1,6 +1,8 @@
 //! `snell`: the command-line front end. Exit status 0 on success, 1 for bad input (a scene or
 //! mesh that cannot be read, an output that cannot be written), 2 for command-line misuse.
 
+mod bench;
+
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -33,6 +35,9 @@ struct Cli {
 enum Command {
     /// Render a scene (.toml) or a bare mesh (.obj, .ply) to PNG or EXR.
     Render(RenderArgs),
+    /// Measure acceleration structure build time and ray throughput on a mesh (the workload of
+    /// the Embree reference benchmark).
+    Bench(bench::BenchArgs),
 }
 
 #[derive(clap::Args)]
@@ -85,6 +90,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => cmd_render(args),
+        Command::Bench(args) => bench::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

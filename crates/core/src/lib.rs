@@ -15,6 +15,7 @@
 //! - `f32` everywhere except where the watertight triangle test falls back to `f64`.
 
 pub mod accel;
+pub mod bench;
 pub mod camera;
 pub mod filter;
 pub mod geometry;

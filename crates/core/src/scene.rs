@@ -154,6 +154,17 @@ impl Scene {
     }
 }
 
+/// A closest hit before shading: the object, the primitive (triangle index, 0 for spheres) and
+/// the barycentrics of vertices 1 and 2 on it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RawHit {
+    pub t: f32,
+    pub object: u32,
+    pub prim: u32,
+    pub b1: f32,
+    pub b2: f32,
+}
+
 /// A surface hit with everything shading needs, in world space.
 #[derive(Clone, Copy, Debug)]
 pub struct Intersection {
@@ -214,8 +225,14 @@ impl<'s, A: Accel> World<'s, A> {
         (&self.top, &self.blas)
     }
 
-    /// Closest hit with `0 < t < t_max`.
+    /// Closest hit with `0 < t < t_max`, with everything shading needs.
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Intersection> {
+        let h = self.hit(ray, t_max)?;
+        Some(self.interaction(ray, h.t, h.object, h.prim, h.b1, h.b2))
+    }
+
+    /// Closest hit with `0 < t < t_max`: only which primitive and where on it.
+    pub fn hit(&self, ray: &Ray, t_max: f32) -> Option<RawHit> {
         // (object, primitive, b1, b2)
         let mut best: Option<(u32, u32, f32, f32)> = None;
         let mut t = t_max;
@@ -248,8 +265,14 @@ impl<'s, A: Accel> World<'s, A> {
                 }
             }
         });
-        let (obj, prim, b1, b2) = best?;
-        Some(self.interaction(ray, t, obj, prim, b1, b2))
+        let (object, prim, b1, b2) = best?;
+        Some(RawHit {
+            t,
+            object,
+            prim,
+            b1,
+            b2,
+        })
     }
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).

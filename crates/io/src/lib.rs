@@ -9,6 +9,7 @@ mod error;
 pub mod image_out;
 pub mod obj;
 pub mod ply;
+pub mod rays;
 pub mod scene;
 
 pub use error::{Error, Location};

@@ -2,6 +2,7 @@
 
 mod accel;
 mod bad_input;
+mod bench;
 mod common;
 mod images;
 mod shared_scenes;

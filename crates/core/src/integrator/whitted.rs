@@ -108,7 +108,11 @@ impl Whitted {
                     throughput,
                 );
             }
-            Material::Conductor { eta, k, roughness: 0.0 } => {
+            Material::Conductor {
+                eta,
+                k,
+                roughness: 0.0,
+            } => {
                 let f = conductor_fresnel(cos_o, eta, k);
                 l += self.child(
                     cx,

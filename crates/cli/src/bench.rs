@@ -1,0 +1,279 @@
+//! `snell bench`: build and ray-throughput measurements on a mesh, with the workload of
+//! `../shared/bench` (the same camera, primary and bounce rays as the Embree reference), or
+//! replaying the rays the Embree tool dumped.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+use snell_core::accel::{Accel, AccelKind, AccelParams};
+use snell_core::geometry::Ray;
+use snell_core::scene::{Geometry, Object, Scene, World};
+use snell_core::shape::Mesh;
+use snell_core::{with_world, Rgb};
+
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// The mesh (.ply or .obj).
+    mesh: PathBuf,
+    /// Accelerator to measure, or `all`.
+    #[arg(long, default_value = "default")]
+    accel: String,
+    /// Worker threads for tracing (default: one per core).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    threads: Option<u32>,
+    /// Replay PREFIX_primary.f32 and PREFIX_bounce.f32 (as `embree_bench --dump-rays` writes them).
+    #[arg(long, value_name = "PREFIX")]
+    rays: Option<PathBuf>,
+    /// One JSON object per accelerator and workload, one per line.
+    #[arg(long)]
+    json: bool,
+    /// Timed repetitions (after one warm-up); the median is reported.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=64))]
+    reps: u32,
+    /// Primary ray image size.
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    width: u32,
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    height: u32,
+}
+
+/// One line of results.
+struct Row {
+    accel: AccelKind,
+    build_ms: f64,
+    accel_bytes: usize,
+    workload: &'static str,
+    rays: usize,
+    hits: usize,
+    mrays_per_s: f64,
+    sah_cost: f32,
+    nodes: usize,
+    leaves: usize,
+    depth: usize,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Runs `f` once to warm up, then `reps` times; returns the last result and the median seconds.
+fn timed<T>(reps: u32, mut f: impl FnMut() -> T) -> (T, f64) {
+    let mut out = f();
+    let mut t = Vec::new();
+    for _ in 0..reps {
+        let t0 = Instant::now();
+        out = f();
+        t.push(t0.elapsed().as_secs_f64());
+    }
+    (out, median(t))
+}
+
+fn count_closest<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
+    rays.par_chunks(1024)
+        .map(|c| {
+            c.iter()
+                .filter(|r| w.hit(r, f32::INFINITY).is_some())
+                .count()
+        })
+        .sum()
+}
+
+fn count_occluded<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
+    rays.par_chunks(1024)
+        .map(|c| c.iter().filter(|r| w.occluded(r, f32::INFINITY)).count())
+        .sum()
+}
+
+/// The brute-force oracle is far too slow for a million rays: it traces every `stride`-th ray.
+fn subset(rays: &[Ray], kind: AccelKind) -> Vec<Ray> {
+    if kind == AccelKind::Brute {
+        let stride = (rays.len() / 2048).max(1);
+        rays.iter().step_by(stride).copied().collect()
+    } else {
+        rays.to_vec()
+    }
+}
+
+fn measure<A: Accel>(
+    w: &World<A>,
+    kind: AccelKind,
+    build_ms: f64,
+    work: &[(&'static str, Vec<Ray>)],
+    reps: u32,
+) -> Vec<Row> {
+    let (_, blas) = w.structures();
+    let stats = blas
+        .first()
+        .and_then(|b| b.as_ref())
+        .map(|b| b.stats())
+        .unwrap_or_default();
+    let (top, _) = w.structures();
+    let bytes = stats.bytes + top.stats().bytes;
+    work.iter()
+        .map(|(name, rays)| {
+            let rays = subset(rays, kind);
+            let (hits, secs) = if *name == "bounce-occluded" {
+                timed(reps, || count_occluded(w, &rays))
+            } else {
+                timed(reps, || count_closest(w, &rays))
+            };
+            Row {
+                accel: kind,
+                build_ms,
+                accel_bytes: bytes,
+                workload: name,
+                rays: rays.len(),
+                hits,
+                mrays_per_s: rays.len() as f64 / secs / 1e6,
+                sah_cost: stats.sah_cost,
+                nodes: stats.nodes,
+                leaves: stats.leaves,
+                depth: stats.max_depth,
+            }
+        })
+        .collect()
+}
+
+/// Builds the workload: the reference's primary rays, and bounce rays from their hits.
+fn workload(mesh: &Mesh, scene: &Scene, args: &BenchArgs) -> Result<Vec<(&'static str, Vec<Ray>)>> {
+    let (primary, bounce) = match &args.rays {
+        Some(prefix) => {
+            let p = |suffix: &str| PathBuf::from(format!("{}_{suffix}.f32", prefix.display()));
+            (
+                snell_io::rays::read(&p("primary"))?,
+                snell_io::rays::read(&p("bounce"))?,
+            )
+        }
+        None => {
+            let primary =
+                snell_core::bench::primary_rays(&mesh.positions, args.width, args.height, 40.0);
+            let world = AccelKind::DEFAULT.build_world(scene, &AccelParams::default());
+            let hits: Vec<Option<(f32, glam::Vec3)>> = with_world!(&world, w => primary
+                .par_iter()
+                .map(|r| {
+                    w.hit(r, f32::INFINITY).map(|h| {
+                        let [a, b, c] = mesh.triangle(h.prim as usize);
+                        (h.t, (b - a).cross(c - a))
+                    })
+                })
+                .collect());
+            let radius = snell_core::bench::radius(&mesh.positions);
+            let bounce = snell_core::bench::bounce_rays(&primary, &hits, radius);
+            (primary, bounce)
+        }
+    };
+    Ok(vec![
+        ("primary", primary),
+        ("bounce", bounce.clone()),
+        ("bounce-occluded", bounce),
+    ])
+}
+
+pub fn run(args: BenchArgs) -> Result<()> {
+    let kinds: Vec<AccelKind> = if args.accel == "all" {
+        AccelKind::ALL.to_vec()
+    } else {
+        vec![args.accel.parse().map_err(anyhow::Error::msg)?]
+    };
+    let mesh = snell_io::read_mesh(&args.mesh)?;
+    let name = args
+        .mesh
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tris = mesh.indices.len();
+    let scene = Scene {
+        geometries: vec![Geometry::Mesh(mesh)],
+        objects: vec![Object {
+            geometry: 0,
+            transform: None,
+            material: 0,
+            emission: Rgb::ZERO,
+            light_samples: 1,
+        }],
+        materials: vec![snell_core::material::Material::Diffuse {
+            albedo: Rgb::ONE.into(),
+        }],
+        lights: vec![],
+        camera: snell_core::camera::Camera::look_at(
+            glam::Vec3::Z,
+            glam::Vec3::ZERO,
+            glam::Vec3::Y,
+            snell_core::camera::Projection::Perspective { fov_y: 40.0 },
+        )
+        .context("internal: camera")?,
+        background: Rgb::ZERO,
+        ambient: Rgb::ZERO,
+    };
+    let Geometry::Mesh(mesh) = &scene.geometries[0] else {
+        unreachable!("built above")
+    };
+    let threads = args.threads.unwrap_or(0) as usize;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("thread pool")?;
+    let threads = pool.current_num_threads();
+    let work = pool.install(|| workload(mesh, &scene, &args))?;
+    if !args.json {
+        println!(
+            "{name}: {tris} triangles, {} primary and {} bounce rays, {threads} threads, median of {} runs",
+            work[0].1.len(),
+            work[1].1.len(),
+            args.reps
+        );
+        println!(
+            "{:<12} {:>9} {:>10} {:>16} {:>9} {:>9} {:>9} {:>8} {:>9} {:>9} {:>6}",
+            "accel",
+            "build ms",
+            "MiB",
+            "workload",
+            "rays",
+            "hits",
+            "Mrays/s",
+            "SAH",
+            "nodes",
+            "leaves",
+            "depth"
+        );
+    }
+    for kind in kinds {
+        let params = AccelParams::default();
+        let (world, build_s) = timed(args.reps, || kind.build_world(&scene, &params));
+        let rows = pool.install(
+            || with_world!(&world, w => measure(w, kind, build_s * 1e3, &work, args.reps)),
+        );
+        for r in rows {
+            if args.json {
+                println!(
+                    "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{threads},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.3},\"sah_cost\":{:.3},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
+                    r.accel, r.build_ms, r.accel_bytes, r.workload, r.rays, r.hits, r.mrays_per_s, r.sah_cost, r.nodes, r.leaves, r.depth
+                );
+            } else {
+                println!(
+                    "{:<12} {:>9.1} {:>10.2} {:>16} {:>9} {:>9} {:>9.2} {:>8.1} {:>9} {:>9} {:>6}",
+                    r.accel.name(),
+                    r.build_ms,
+                    r.accel_bytes as f64 / (1024.0 * 1024.0),
+                    r.workload,
+                    r.rays,
+                    r.hits,
+                    r.mrays_per_s,
+                    r.sah_cost,
+                    r.nodes,
+                    r.leaves,
+                    r.depth
+                );
+            }
+        }
+    }
+    Ok(())
+}
