@@ -77,19 +77,11 @@ fn timed<T>(reps: u32, mut f: impl FnMut() -> T) -> (T, f64) {
 }
 
 fn count_closest<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
-    rays.par_chunks(1024)
-        .map(|c| {
-            c.iter()
-                .filter(|r| w.hit(r, f32::INFINITY).is_some())
-                .count()
-        })
-        .sum()
+    rays.par_chunks(1024).map(|c| c.iter().filter(|r| w.hit(r, f32::INFINITY).is_some()).count()).sum()
 }
 
 fn count_occluded<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
-    rays.par_chunks(1024)
-        .map(|c| c.iter().filter(|r| w.occluded(r, f32::INFINITY)).count())
-        .sum()
+    rays.par_chunks(1024).map(|c| c.iter().filter(|r| w.occluded(r, f32::INFINITY)).count()).sum()
 }
 
 /// The brute-force oracle is far too slow for a million rays: it traces every `stride`-th ray.
@@ -110,11 +102,7 @@ fn measure<A: Accel>(
     reps: u32,
 ) -> Vec<Row> {
     let (_, blas) = w.structures();
-    let stats = blas
-        .first()
-        .and_then(|b| b.as_ref())
-        .map(|b| b.stats())
-        .unwrap_or_default();
+    let stats = blas.first().and_then(|b| b.as_ref()).map(|b| b.stats()).unwrap_or_default();
     let (top, _) = w.structures();
     let bytes = stats.bytes + top.stats().bytes;
     work.iter()
@@ -147,14 +135,10 @@ fn workload(mesh: &Mesh, scene: &Scene, args: &BenchArgs) -> Result<Vec<(&'stati
     let (primary, bounce) = match &args.rays {
         Some(prefix) => {
             let p = |suffix: &str| PathBuf::from(format!("{}_{suffix}.f32", prefix.display()));
-            (
-                snell_io::rays::read(&p("primary"))?,
-                snell_io::rays::read(&p("bounce"))?,
-            )
+            (snell_io::rays::read(&p("primary"))?, snell_io::rays::read(&p("bounce"))?)
         }
         None => {
-            let primary =
-                snell_core::bench::primary_rays(&mesh.positions, args.width, args.height, 40.0);
+            let primary = snell_core::bench::primary_rays(&mesh.positions, args.width, args.height, 40.0);
             let world = AccelKind::DEFAULT.build_world(scene, &AccelParams::default());
             let hits: Vec<Option<(f32, glam::Vec3)>> = with_world!(&world, w => primary
                 .par_iter()
@@ -170,11 +154,7 @@ fn workload(mesh: &Mesh, scene: &Scene, args: &BenchArgs) -> Result<Vec<(&'stati
             (primary, bounce)
         }
     };
-    Ok(vec![
-        ("primary", primary),
-        ("bounce", bounce.clone()),
-        ("bounce-occluded", bounce),
-    ])
+    Ok(vec![("primary", primary), ("bounce", bounce.clone()), ("bounce-occluded", bounce)])
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
@@ -184,24 +164,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
         vec![args.accel.parse().map_err(anyhow::Error::msg)?]
     };
     let mesh = snell_io::read_mesh(&args.mesh)?;
-    let name = args
-        .mesh
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let name = args.mesh.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tris = mesh.indices.len();
     let scene = Scene {
         geometries: vec![Geometry::Mesh(mesh)],
-        objects: vec![Object {
-            geometry: 0,
-            transform: None,
-            material: 0,
-            emission: Rgb::ZERO,
-            light_samples: 1,
-        }],
-        materials: vec![snell_core::material::Material::Diffuse {
-            albedo: Rgb::ONE.into(),
-        }],
+        objects: vec![Object { geometry: 0, transform: None, material: 0, emission: Rgb::ZERO, light_samples: 1 }],
+        materials: vec![snell_core::material::Material::Diffuse { albedo: Rgb::ONE.into() }],
         lights: vec![],
         camera: snell_core::camera::Camera::look_at(
             glam::Vec3::Z,
@@ -213,14 +181,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
         background: Rgb::ZERO,
         ambient: Rgb::ZERO,
     };
-    let Geometry::Mesh(mesh) = &scene.geometries[0] else {
-        unreachable!("built above")
-    };
+    let Geometry::Mesh(mesh) = &scene.geometries[0] else { unreachable!("built above") };
     let threads = args.threads.unwrap_or(0) as usize;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .context("thread pool")?;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("thread pool")?;
     let threads = pool.current_num_threads();
     let work = pool.install(|| workload(mesh, &scene, &args))?;
     if !args.json {
@@ -232,25 +195,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
         );
         println!(
             "{:<12} {:>9} {:>10} {:>16} {:>9} {:>9} {:>9} {:>8} {:>9} {:>9} {:>6}",
-            "accel",
-            "build ms",
-            "MiB",
-            "workload",
-            "rays",
-            "hits",
-            "Mrays/s",
-            "SAH",
-            "nodes",
-            "leaves",
-            "depth"
+            "accel", "build ms", "MiB", "workload", "rays", "hits", "Mrays/s", "SAH", "nodes", "leaves", "depth"
         );
     }
     for kind in kinds {
         let params = AccelParams::default();
         let (world, build_s) = timed(args.reps, || kind.build_world(&scene, &params));
-        let rows = pool.install(
-            || with_world!(&world, w => measure(w, kind, build_s * 1e3, &work, args.reps)),
-        );
+        let rows = pool.install(|| with_world!(&world, w => measure(w, kind, build_s * 1e3, &work, args.reps)));
         for r in rows {
             if args.json {
                 println!(

@@ -21,11 +21,7 @@ use snell_io::scene::LoadedScene;
 const DEFAULT_SCENE: &str = include_str!("../../../scenes/default.toml");
 
 #[derive(Parser)]
-#[command(
-    name = "snell",
-    version,
-    about = "Snell: a physically based CPU ray tracer"
-)]
+#[command(name = "snell", version, about = "Snell: a physically based CPU ray tracer")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -103,22 +99,13 @@ fn main() -> ExitCode {
 
 fn load(scene: Option<&Path>) -> Result<LoadedScene> {
     let Some(path) = scene else {
-        return Ok(snell_io::scene::parse(
-            DEFAULT_SCENE,
-            Path::new("<built-in default scene>"),
-        )?);
+        return Ok(snell_io::scene::parse(DEFAULT_SCENE, Path::new("<built-in default scene>"))?);
     };
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase());
+    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
     Ok(match ext.as_deref() {
         Some("toml") => snell_io::scene::load(path)?,
         Some("obj") | Some("ply") => snell_io::scene::from_mesh(path)?,
-        _ => bail!(
-            "{}: unsupported scene format (expected .toml, .obj or .ply)",
-            path.display()
-        ),
+        _ => bail!("{}: unsupported scene format (expected .toml, .obj or .ply)", path.display()),
     })
 }
 
@@ -145,10 +132,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     };
     let accel = args.accel.unwrap_or(s.accel);
     // An automatic camera is framed for the final aspect ratio.
-    if let Some(c) = loaded
-        .frame
-        .and_then(|b| snell_io::scene::auto_camera(b, settings.width, settings.height))
-    {
+    if let Some(c) = loaded.frame.and_then(|b| snell_io::scene::auto_camera(b, settings.width, settings.height)) {
         scene.camera = c;
     }
 
@@ -163,10 +147,8 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         ProgressBar::hidden()
     };
     bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] [{wide_bar}] {percent:>3}% ETA {eta}",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] [{wide_bar}] {percent:>3}% ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let progress = |n: u64| bar.inc(n);
     let t_render = Instant::now();

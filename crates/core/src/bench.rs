@@ -56,9 +56,7 @@ pub fn primary_rays(positions: &[Vec3], width: u32, height: u32, fov_deg: f32) -
 #[inline]
 fn pcg(s: &mut u64) -> u32 {
     let old = *s;
-    *s = old
-        .wrapping_mul(6_364_136_223_846_793_005)
-        .wrapping_add(1_442_695_040_888_963_407);
+    *s = old.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
     let x = (((old >> 18) ^ old) >> 27) as u32;
     let rot = (old >> 59) as u32;
     x.rotate_right(rot)
@@ -122,10 +120,7 @@ mod tests {
 
     #[test]
     fn bounce_rays_leave_towards_the_viewer() {
-        let pr = [
-            Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z),
-            Ray::new(Vec3::ZERO, Vec3::X),
-        ];
+        let pr = [Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z), Ray::new(Vec3::ZERO, Vec3::X)];
         let hits = [Some((5.0, Vec3::new(0.0, 0.0, -3.0))), None];
         let b = bounce_rays(&pr, &hits, 1.0);
         assert_eq!(b.len(), 1);

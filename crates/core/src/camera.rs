@@ -11,11 +11,7 @@ pub enum Projection {
     /// Pinhole; `fov_y` is the full vertical field of view in degrees.
     Perspective { fov_y: f32 },
     /// Thin lens of radius `aperture` focused at `focus_distance` along the view direction.
-    ThinLens {
-        fov_y: f32,
-        aperture: f32,
-        focus_distance: f32,
-    },
+    ThinLens { fov_y: f32, aperture: f32, focus_distance: f32 },
     /// Parallel rays; `half_height` is half the height of the view in world units.
     Orthographic { half_height: f32 },
 }
@@ -39,13 +35,7 @@ impl Camera {
             return None;
         }
         let up = right.cross(forward);
-        Some(Camera {
-            eye,
-            forward,
-            right,
-            up,
-            projection,
-        })
+        Some(Camera { eye, forward, right, up, projection })
     }
 
     pub fn forward(&self) -> Vec3 {
@@ -65,11 +55,7 @@ impl Camera {
                 let d = self.forward + self.right * (sx * t) + self.up * (sy * t);
                 Ray::new(self.eye, d.normalize())
             }
-            Projection::ThinLens {
-                fov_y,
-                aperture,
-                focus_distance,
-            } => {
+            Projection::ThinLens { fov_y, aperture, focus_distance } => {
                 let t = (fov_y.to_radians() * 0.5).tan();
                 let d = self.forward + self.right * (sx * t) + self.up * (sy * t);
                 let focus = self.eye + d * focus_distance;
@@ -91,13 +77,7 @@ mod tests {
 
     #[test]
     fn centre_ray_looks_at_target_and_corners_span_fov() {
-        let c = Camera::look_at(
-            Vec3::ZERO,
-            -Vec3::Z,
-            Vec3::Y,
-            Projection::Perspective { fov_y: 90.0 },
-        )
-        .unwrap();
+        let c = Camera::look_at(Vec3::ZERO, -Vec3::Z, Vec3::Y, Projection::Perspective { fov_y: 90.0 }).unwrap();
         let r = c.ray(Vec2::new(50.0, 50.0), 100, 100, Vec2::ZERO);
         assert!((r.d - -Vec3::Z).length() < 1e-6);
         let top = c.ray(Vec2::new(50.0, 0.0), 100, 100, Vec2::ZERO);
@@ -106,11 +86,7 @@ mod tests {
 
     #[test]
     fn thin_lens_rays_converge_at_focus_distance() {
-        let p = Projection::ThinLens {
-            fov_y: 40.0,
-            aperture: 0.5,
-            focus_distance: 3.0,
-        };
+        let p = Projection::ThinLens { fov_y: 40.0, aperture: 0.5, focus_distance: 3.0 };
         let c = Camera::look_at(Vec3::ZERO, -Vec3::Z, Vec3::Y, p).unwrap();
         let film = Vec2::new(30.0, 70.0);
         let a = c.ray(film, 100, 100, Vec2::new(0.1, 0.9));
@@ -123,13 +99,7 @@ mod tests {
 
     #[test]
     fn orthographic_rays_are_parallel() {
-        let c = Camera::look_at(
-            Vec3::Z,
-            Vec3::ZERO,
-            Vec3::Y,
-            Projection::Orthographic { half_height: 2.0 },
-        )
-        .unwrap();
+        let c = Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, Projection::Orthographic { half_height: 2.0 }).unwrap();
         let a = c.ray(Vec2::new(0.0, 0.0), 10, 10, Vec2::ZERO);
         let b = c.ray(Vec2::new(10.0, 10.0), 10, 10, Vec2::ZERO);
         assert_eq!(a.d, b.d);
@@ -139,19 +109,7 @@ mod tests {
 
     #[test]
     fn degenerate_look_at_is_rejected() {
-        assert!(Camera::look_at(
-            Vec3::ZERO,
-            Vec3::Y,
-            Vec3::Y,
-            Projection::Perspective { fov_y: 40.0 }
-        )
-        .is_none());
-        assert!(Camera::look_at(
-            Vec3::ZERO,
-            Vec3::ZERO,
-            Vec3::Y,
-            Projection::Perspective { fov_y: 40.0 }
-        )
-        .is_none());
+        assert!(Camera::look_at(Vec3::ZERO, Vec3::Y, Vec3::Y, Projection::Perspective { fov_y: 40.0 }).is_none());
+        assert!(Camera::look_at(Vec3::ZERO, Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 40.0 }).is_none());
     }
 }

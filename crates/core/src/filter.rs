@@ -14,11 +14,7 @@ pub enum Filter {
     /// Linear falloff to zero at `radius`.
     Tent { radius: f32 },
     /// Gaussian of standard deviation `sigma` truncated at `radius`.
-    Gaussian {
-        radius: f32,
-        sigma: f32,
-        cdf: Vec<f32>,
-    },
+    Gaussian { radius: f32, sigma: f32, cdf: Vec<f32> },
 }
 
 impl Default for Filter {
@@ -39,9 +35,7 @@ impl Filter {
 
     pub fn radius(&self) -> f32 {
         match self {
-            Filter::Box { radius } | Filter::Tent { radius } | Filter::Gaussian { radius, .. } => {
-                *radius
-            }
+            Filter::Box { radius } | Filter::Tent { radius } | Filter::Gaussian { radius, .. } => *radius,
         }
     }
 
@@ -74,19 +68,12 @@ mod tests {
 
     #[test]
     fn samples_stay_within_radius_and_are_centred() {
-        for f in [
-            Filter::Box { radius: 0.5 },
-            Filter::Tent { radius: 1.0 },
-            Filter::gaussian(1.5, 0.5),
-        ] {
+        for f in [Filter::Box { radius: 0.5 }, Filter::Tent { radius: 1.0 }, Filter::gaussian(1.5, 0.5)] {
             let r = f.radius();
             let n = 1000;
             let mut mean = Vec2::ZERO;
             for i in 0..n {
-                let u = Vec2::new(
-                    (i as f32 + 0.5) / n as f32,
-                    ((i * 7919 % n) as f32 + 0.5) / n as f32,
-                );
+                let u = Vec2::new((i as f32 + 0.5) / n as f32, ((i * 7919 % n) as f32 + 0.5) / n as f32);
                 let o = f.sample(u);
                 assert!(o.x.abs() <= r && o.y.abs() <= r, "{f:?} {o}");
                 mean += o / n as f32;
@@ -99,9 +86,7 @@ mod tests {
     fn gaussian_concentrates_near_centre() {
         let f = Filter::gaussian(1.5, 0.5);
         // About 68 % of a (barely truncated) normal lies within one sigma.
-        let inside = (0..1000)
-            .filter(|i| f.sample(Vec2::splat((*i as f32 + 0.5) / 1000.0)).x.abs() < 0.5)
-            .count();
+        let inside = (0..1000).filter(|i| f.sample(Vec2::splat((*i as f32 + 0.5) / 1000.0)).x.abs() < 0.5).count();
         assert!((600..760).contains(&inside), "{inside}");
     }
 }

@@ -12,11 +12,7 @@ pub struct Image {
 
 impl Image {
     pub fn new(width: u32, height: u32) -> Image {
-        Image {
-            width,
-            height,
-            pixels: vec![Rgb::ZERO; width as usize * height as usize],
-        }
+        Image { width, height, pixels: vec![Rgb::ZERO; width as usize * height as usize] }
     }
 
     #[inline]
@@ -26,18 +22,12 @@ impl Image {
 
     /// 8-bit sRGB, 3 bytes per pixel (values clamped to `[0, 1]` before encoding).
     pub fn to_srgb8(&self) -> Vec<u8> {
-        self.pixels
-            .iter()
-            .flat_map(|p| p.to_array().map(|c| (srgb_encode(c) * 255.0 + 0.5) as u8))
-            .collect()
+        self.pixels.iter().flat_map(|p| p.to_array().map(|c| (srgb_encode(c) * 255.0 + 0.5) as u8)).collect()
     }
 
     /// Mean of all pixels.
     pub fn mean(&self) -> Rgb {
-        let s = self
-            .pixels
-            .iter()
-            .fold(glam::DVec3::ZERO, |a, p| a + p.as_dvec3());
+        let s = self.pixels.iter().fold(glam::DVec3::ZERO, |a, p| a + p.as_dvec3());
         (s / self.pixels.len().max(1) as f64).as_vec3()
     }
 }

@@ -17,13 +17,7 @@ pub enum Light {
     Point { position: Vec3, intensity: Rgb },
     /// Spot light pointing along `direction` (unit): full intensity inside `cos_inner`, a smooth
     /// falloff to zero at `cos_outer` (pbrt-v4's convention).
-    Spot {
-        position: Vec3,
-        direction: Vec3,
-        intensity: Rgb,
-        cos_inner: f32,
-        cos_outer: f32,
-    },
+    Spot { position: Vec3, direction: Vec3, intensity: Rgb, cos_inner: f32, cos_outer: f32 },
     /// Distant light travelling along `direction` (unit), delivering `irradiance` on a surface
     /// facing it.
     Directional { direction: Vec3, irradiance: Rgb },
@@ -81,10 +75,7 @@ impl Light {
     /// Samples light arriving at `p`; `u` is uniform in `[0, 1)²`.
     pub fn sample(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
         match self {
-            Light::Point {
-                position,
-                intensity,
-            } => {
+            Light::Point { position, intensity } => {
                 let d = *position - p;
                 let d2 = d.length_squared();
                 (d2 > 0.0).then(|| LightSample {
@@ -95,13 +86,7 @@ impl Light {
                     value: *intensity / d2,
                 })
             }
-            Light::Spot {
-                position,
-                direction,
-                intensity,
-                cos_inner,
-                cos_outer,
-            } => {
+            Light::Spot { position, direction, intensity, cos_inner, cos_outer } => {
                 let d = *position - p;
                 let d2 = d.length_squared();
                 if d2 <= 0.0 {
@@ -118,10 +103,7 @@ impl Light {
                     value: *intensity * (falloff / d2),
                 })
             }
-            Light::Directional {
-                direction,
-                irradiance,
-            } => Some(LightSample {
+            Light::Directional { direction, irradiance } => Some(LightSample {
                 wi: -*direction,
                 p: p - *direction,
                 n: Vec3::ZERO,
@@ -170,13 +152,7 @@ impl AreaLight {
                 let q = p + wi * t;
                 let n = (q - s.center).normalize();
                 let pdf = 1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12));
-                Some(LightSample {
-                    wi,
-                    p: q,
-                    n,
-                    infinite: false,
-                    value: self.emission / pdf,
-                })
+                Some(LightSample { wi, p: q, n, infinite: false, value: self.emission / pdf })
             }
             AreaShape::Triangles { tris, cdf } => {
                 let total = *cdf.last()?;
@@ -200,13 +176,7 @@ impl AreaLight {
                 }
                 // Area pdf 1/A converted to solid angle: dist² / (cos_l · A).
                 let value = self.emission * (cos_l * total / dist2);
-                Some(LightSample {
-                    wi,
-                    p: q,
-                    n,
-                    infinite: false,
-                    value,
-                })
+                Some(LightSample { wi, p: q, n, infinite: false, value })
             }
         }
     }
@@ -237,10 +207,7 @@ mod tests {
             object: 0,
             emission: Rgb::ONE,
             samples: 1,
-            shape: AreaShape::Sphere(Sphere {
-                center: Vec3::new(0.0, 0.0, d),
-                radius: r,
-            }),
+            shape: AreaShape::Sphere(Sphere { center: Vec3::new(0.0, 0.0, d), radius: r }),
         });
         let e = irradiance(&l, 200_000);
         let exact = PI * (r / d).powi(2);
@@ -256,14 +223,8 @@ mod tests {
         let h = 10.0f32;
         let s = 0.1f32;
         let c = Vec3::new(-s / 2.0, -s / 2.0, h);
-        let tris = vec![
-            [c, c + Vec3::Y * s, c + Vec3::new(s, s, 0.0)],
-            [c, c + Vec3::new(s, s, 0.0), c + Vec3::X * s],
-        ];
-        let cdf = crate::sampling::build_cdf(
-            tris.iter()
-                .map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()),
-        );
+        let tris = vec![[c, c + Vec3::Y * s, c + Vec3::new(s, s, 0.0)], [c, c + Vec3::new(s, s, 0.0), c + Vec3::X * s]];
+        let cdf = crate::sampling::build_cdf(tris.iter().map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()));
         let l = Light::Area(AreaLight {
             object: 0,
             emission: Rgb::ONE,

@@ -28,14 +28,7 @@ pub struct RenderSettings {
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings {
-            width: 640,
-            height: 480,
-            spp: 16,
-            seed: 0,
-            threads: 0,
-            filter: Filter::default(),
-        }
+        RenderSettings { width: 640, height: 480, spp: 16, seed: 0, threads: 0, filter: Filter::default() }
     }
 }
 
@@ -47,10 +40,7 @@ impl RenderSettings {
     /// memory, or zero samples.
     pub fn check(&self) -> Result<(), String> {
         if self.width == 0 || self.height == 0 {
-            return Err(format!(
-                "the image is {}x{} pixels; both sizes must be at least 1",
-                self.width, self.height
-            ));
+            return Err(format!("the image is {}x{} pixels; both sizes must be at least 1", self.width, self.height));
         }
         let pixels = self.width as u64 * self.height as u64;
         if pixels > MAX_PIXELS {
@@ -77,9 +67,8 @@ pub fn render<A: Accel, I: Integrator>(
     progress: &(dyn Fn(u64) + Sync),
 ) -> (Image, RayStats) {
     let (w, h) = (settings.width, settings.height);
-    let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE))
-        .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE)))
-        .collect();
+    let tiles: Vec<(u32, u32)> =
+        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
     let work = || {
         tiles
             .par_iter()
@@ -97,10 +86,7 @@ pub fn render<A: Accel, I: Integrator>(
             })
             .collect::<Vec<_>>()
     };
-    let results = match rayon::ThreadPoolBuilder::new()
-        .num_threads(settings.threads)
-        .build()
-    {
+    let results = match rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build() {
         Ok(pool) => pool.install(work),
         Err(_) => work(),
     };

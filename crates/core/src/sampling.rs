@@ -26,10 +26,7 @@ pub fn mix64(mut z: u64) -> u64 {
 
 impl Pcg32 {
     pub fn new(seed: u64, stream: u64) -> Pcg32 {
-        let mut r = Pcg32 {
-            state: 0,
-            inc: (stream << 1) | 1,
-        };
+        let mut r = Pcg32 { state: 0, inc: (stream << 1) | 1 };
         r.next_u32();
         r.state = r.state.wrapping_add(seed);
         r.next_u32();
@@ -109,10 +106,7 @@ pub fn stratified_2d(i: u32, n: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
     let k = (n as f32).sqrt() as u32;
     if k * k == n {
         let cell = permute(i, n, key);
-        Vec2::new(
-            ((cell % k) as f32 + j.x) / k as f32,
-            ((cell / k) as f32 + j.y) / k as f32,
-        )
+        Vec2::new(((cell % k) as f32 + j.x) / k as f32, ((cell / k) as f32 + j.y) / k as f32)
     } else {
         let row = permute(i, n, key);
         Vec2::new((i as f32 + j.x) / n as f32, (row as f32 + j.y) / n as f32)
@@ -129,10 +123,7 @@ pub fn concentric_disk(u: Vec2) -> Vec2 {
     let (r, theta) = if o.x.abs() > o.y.abs() {
         (o.x, std::f32::consts::FRAC_PI_4 * (o.y / o.x))
     } else {
-        (
-            o.y,
-            std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y),
-        )
+        (o.y, std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y))
     };
     r * Vec2::new(theta.cos(), theta.sin())
 }
@@ -156,19 +147,10 @@ pub fn uniform_triangle(u: Vec2) -> (f32, f32) {
 pub fn sample_cdf(cdf: &[f32], u: f32) -> (usize, f32) {
     let total = *cdf.last().unwrap_or(&0.0);
     let x = u * total;
-    let i = cdf
-        .partition_point(|&c| c <= x)
-        .min(cdf.len().saturating_sub(1));
+    let i = cdf.partition_point(|&c| c <= x).min(cdf.len().saturating_sub(1));
     let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
     let w = cdf[i] - lo;
-    (
-        i,
-        if w > 0.0 {
-            ((x - lo) / w).clamp(0.0, 1.0 - f32::EPSILON)
-        } else {
-            0.0
-        },
-    )
+    (i, if w > 0.0 { ((x - lo) / w).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 })
 }
 
 /// Running sums of `weights` (the unnormalised CDF).
@@ -211,9 +193,7 @@ mod tests {
             if n == 10 {
                 assert_eq!(cols, (0..n).collect::<Vec<_>>());
             }
-            assert!(pts
-                .iter()
-                .all(|p| p.x >= 0.0 && p.x < 1.0 && p.y >= 0.0 && p.y < 1.0));
+            assert!(pts.iter().all(|p| p.x >= 0.0 && p.x < 1.0 && p.y >= 0.0 && p.y < 1.0));
         }
     }
 

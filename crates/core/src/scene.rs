@@ -61,26 +61,15 @@ impl Scene {
     pub fn check(&self) -> Result<(), String> {
         for (i, o) in self.objects.iter().enumerate() {
             if o.geometry >= self.geometries.len() {
-                return Err(format!(
-                    "object {i} refers to geometry {} of {}",
-                    o.geometry,
-                    self.geometries.len()
-                ));
+                return Err(format!("object {i} refers to geometry {} of {}", o.geometry, self.geometries.len()));
             }
             if o.material >= self.materials.len() {
-                return Err(format!(
-                    "object {i} refers to material {} of {}",
-                    o.material,
-                    self.materials.len()
-                ));
+                return Err(format!("object {i} refers to material {} of {}", o.material, self.materials.len()));
             }
             if o.emission != Rgb::ZERO {
-                if let (Geometry::Sphere(_), Some(t)) = (&self.geometries[o.geometry], &o.transform)
-                {
+                if let (Geometry::Sphere(_), Some(t)) = (&self.geometries[o.geometry], &o.transform) {
                     if t.uniform_scale().is_none() {
-                        return Err(format!(
-                            "object {i}: an emissive sphere may only be scaled uniformly"
-                        ));
+                        return Err(format!("object {i}: an emissive sphere may only be scaled uniformly"));
                     }
                 }
             }
@@ -90,9 +79,7 @@ impl Scene {
 
     /// World-space bounds of everything.
     pub fn aabb(&self) -> Aabb {
-        self.objects
-            .iter()
-            .fold(Aabb::EMPTY, |b, o| b.union(self.object_aabb(o)))
+        self.objects.iter().fold(Aabb::EMPTY, |b, o| b.union(self.object_aabb(o)))
     }
 
     /// World-space box of an object: for a transformed object, the box of the 8 transformed
@@ -120,10 +107,7 @@ impl Scene {
         let shape = match &self.geometries[o.geometry] {
             Geometry::Sphere(s) => {
                 let (center, radius) = match &o.transform {
-                    Some(t) => (
-                        t.point(s.center),
-                        s.radius * t.uniform_scale().unwrap_or(1.0),
-                    ),
+                    Some(t) => (t.point(s.center), s.radius * t.uniform_scale().unwrap_or(1.0)),
                     None => (s.center, s.radius),
                 };
                 AreaShape::Sphere(Sphere { center, radius })
@@ -138,19 +122,11 @@ impl Scene {
                         }
                     })
                     .collect();
-                let cdf = build_cdf(
-                    tris.iter()
-                        .map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()),
-                );
+                let cdf = build_cdf(tris.iter().map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()));
                 AreaShape::Triangles { tris, cdf }
             }
         };
-        AreaLight {
-            object: index as u32,
-            emission: o.emission,
-            samples: o.light_samples.max(1),
-            shape,
-        }
+        AreaLight { object: index as u32, emission: o.emission, samples: o.light_samples.max(1), shape }
     }
 }
 
@@ -186,6 +162,9 @@ pub struct World<'s, A: Accel> {
     pub scene: &'s Scene,
     top: A,
     blas: Vec<Option<A>>,
+    /// Per mesh geometry, the corners of each triangle (object space), so that the triangle
+    /// test reads one 36-byte record instead of gathering through the index buffer.
+    tris: Vec<Vec<[Vec3; 3]>>,
     pub lights: Vec<Light>,
 }
 
@@ -197,11 +176,18 @@ impl<'s, A: Accel> World<'s, A> {
             .par_iter()
             .map(|g| match g {
                 Geometry::Mesh(m) => {
-                    let boxes: Vec<Aabb> =
-                        (0..m.indices.len()).map(|i| m.triangle_aabb(i)).collect();
+                    let boxes: Vec<Aabb> = (0..m.indices.len()).map(|i| m.triangle_aabb(i)).collect();
                     Some(A::build(&boxes, params))
                 }
                 Geometry::Sphere(_) => None,
+            })
+            .collect();
+        let tris = scene
+            .geometries
+            .iter()
+            .map(|g| match g {
+                Geometry::Mesh(m) => (0..m.indices.len()).map(|i| m.triangle(i)).collect(),
+                Geometry::Sphere(_) => Vec::new(),
             })
             .collect();
         let boxes: Vec<Aabb> = scene.objects.iter().map(|o| scene.object_aabb(o)).collect();
@@ -212,12 +198,7 @@ impl<'s, A: Accel> World<'s, A> {
                 lights.push(Light::Area(scene.area_light(i, o)));
             }
         }
-        World {
-            scene,
-            top,
-            blas,
-            lights,
-        }
+        World { scene, top, blas, tris, lights }
     }
 
     /// The top-level structure and the bottom-level one of each geometry (None for spheres).
@@ -246,13 +227,14 @@ impl<'s, A: Accel> World<'s, A> {
                 Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
                     best = Some((obj, 0, 0.0, 0.0));
                 }),
-                Geometry::Mesh(m) => {
+                Geometry::Mesh(_) => {
                     let accel = self.blas[o.geometry].as_ref()?;
+                    let tris = &self.tris[o.geometry];
                     let wr = WatertightRay::new(local.o, local.d);
                     let mut tm = tmax;
                     let mut rec = None;
                     accel.closest(&local, &mut tm, |tri, tmx| {
-                        let [a, b, c] = m.triangle(tri as usize);
+                        let [a, b, c] = tris[tri as usize];
                         intersect_triangle(&wr, a, b, c, tmx).map(|h| {
                             rec = Some((tri, h.b1, h.b2));
                             h.t
@@ -266,13 +248,7 @@ impl<'s, A: Accel> World<'s, A> {
             }
         });
         let (object, prim, b1, b2) = best?;
-        Some(RawHit {
-            t,
-            object,
-            prim,
-            b1,
-            b2,
-        })
+        Some(RawHit { t, object, prim, b1, b2 })
     }
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
@@ -285,13 +261,12 @@ impl<'s, A: Accel> World<'s, A> {
             };
             match &self.scene.geometries[o.geometry] {
                 Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).is_some(),
-                Geometry::Mesh(m) => {
-                    let Some(accel) = self.blas[o.geometry].as_ref() else {
-                        return false;
-                    };
+                Geometry::Mesh(_) => {
+                    let Some(accel) = self.blas[o.geometry].as_ref() else { return false };
+                    let tris = &self.tris[o.geometry];
                     let wr = WatertightRay::new(local.o, local.d);
                     accel.any(&local, tmax, |tri, tmx| {
-                        let [a, b, c] = m.triangle(tri as usize);
+                        let [a, b, c] = tris[tri as usize];
                         intersect_triangle(&wr, a, b, c, tmx).is_some()
                     })
                 }
@@ -299,15 +274,7 @@ impl<'s, A: Accel> World<'s, A> {
         })
     }
 
-    fn interaction(
-        &self,
-        ray: &Ray,
-        t: f32,
-        obj: u32,
-        prim: u32,
-        b1: f32,
-        b2: f32,
-    ) -> Intersection {
+    fn interaction(&self, ray: &Ray, t: f32, obj: u32, prim: u32, b1: f32, b2: f32) -> Intersection {
         let o = &self.scene.objects[obj as usize];
         let (p, mut ng, mut ns, uv) = match &self.scene.geometries[o.geometry] {
             Geometry::Sphere(s) => {
@@ -367,13 +334,6 @@ impl<'s, A: Accel> World<'s, A> {
         if ns == Vec3::ZERO || ns.dot(ng) <= 0.0 {
             ns = ng;
         }
-        Intersection {
-            t,
-            p,
-            ng,
-            ns,
-            uv,
-            object: obj,
-        }
+        Intersection { t, p, ng, ns, uv, object: obj }
     }
 }

@@ -35,19 +35,11 @@ impl fmt::Display for Error {
 
 impl Error {
     pub fn new(path: &Path, message: impl Into<String>) -> Error {
-        Error {
-            path: path.to_path_buf(),
-            location: None,
-            message: message.into(),
-        }
+        Error { path: path.to_path_buf(), location: None, message: message.into() }
     }
 
     pub fn at(path: &Path, location: Location, message: impl Into<String>) -> Error {
-        Error {
-            path: path.to_path_buf(),
-            location: Some(location),
-            message: message.into(),
-        }
+        Error { path: path.to_path_buf(), location: Some(location), message: message.into() }
     }
 
     pub fn io(path: &Path, e: std::io::Error) -> Error {

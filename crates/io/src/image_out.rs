@@ -18,18 +18,10 @@ pub enum ImageFormat {
 
 /// The format for a path, from its extension.
 pub fn format_for(path: &Path) -> Result<ImageFormat, Error> {
-    match path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase())
-        .as_deref()
-    {
+    match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
         Some("png") => Ok(ImageFormat::Png),
         Some("exr") => Ok(ImageFormat::Exr),
-        _ => Err(Error::new(
-            path,
-            "unsupported image format (the output must end in .png or .exr)",
-        )),
+        _ => Err(Error::new(path, "unsupported image format (the output must end in .png or .exr)")),
     }
 }
 
@@ -40,8 +32,7 @@ pub fn encode(image: &Image, format: ImageFormat) -> Result<Vec<u8>, String> {
         ImageFormat::Png => {
             let img = image::RgbImage::from_raw(image.width, image.height, image.to_srgb8())
                 .ok_or("image size does not match its pixels")?;
-            img.write_to(&mut buf, image::ImageFormat::Png)
-                .map_err(|e| e.to_string())?;
+            img.write_to(&mut buf, image::ImageFormat::Png).map_err(|e| e.to_string())?;
         }
         ImageFormat::Exr => {
             let data: Vec<f32> = image.pixels.iter().flat_map(|p| p.to_array()).collect();
@@ -61,14 +52,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), Error> {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::new(path, "not a file name"))?;
-    let tmp = dir.join(format!(
-        ".{}.{}.tmp",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
+    let name = path.file_name().ok_or_else(|| Error::new(path, "not a file name"))?;
+    let tmp = dir.join(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
     let result = (|| -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
@@ -94,10 +79,7 @@ pub fn check_output(path: &Path) -> Result<(), Error> {
     format_for(path)?;
     if let Some(d) = path.parent() {
         if !d.as_os_str().is_empty() && !d.is_dir() {
-            return Err(Error::new(
-                path,
-                format!("the directory '{}' does not exist", d.display()),
-            ));
+            return Err(Error::new(path, format!("the directory '{}' does not exist", d.display())));
         }
     }
     if path.is_dir() {

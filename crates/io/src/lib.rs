@@ -20,23 +20,14 @@ use snell_core::shape::Mesh;
 
 /// Reads a mesh by extension (`.obj` or `.ply`), validated and without degenerate-index faces.
 pub fn read_mesh(path: &Path) -> Result<Mesh, Error> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase());
+    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
     let mut mesh = match ext.as_deref() {
         Some("obj") => obj::read(path)?,
         Some("ply") => ply::read(path)?,
-        _ => {
-            return Err(Error::new(
-                path,
-                "unsupported mesh format (expected .obj or .ply)",
-            ))
-        }
+        _ => return Err(Error::new(path, "unsupported mesh format (expected .obj or .ply)")),
     };
     mesh.drop_degenerate_indices();
-    mesh.validate()
-        .map_err(|e| Error::new(path, e.to_string()))?;
+    mesh.validate().map_err(|e| Error::new(path, e.to_string()))?;
     if mesh.indices.is_empty() {
         return Err(Error::new(path, "the mesh has no triangles"));
     }

@@ -20,18 +20,11 @@ pub fn read(path: &Path) -> Result<Mesh, Error> {
     parse(&text).map_err(|(line, msg)| Error::at(path, Location::Line(line), msg))
 }
 
-fn floats<const N: usize>(
-    it: &mut std::str::SplitWhitespace,
-    what: &str,
-) -> Result<[f32; N], String> {
+fn floats<const N: usize>(it: &mut std::str::SplitWhitespace, what: &str) -> Result<[f32; N], String> {
     let mut out = [0.0; N];
     for (i, o) in out.iter_mut().enumerate() {
-        let tok = it
-            .next()
-            .ok_or_else(|| format!("{what} needs {N} numbers, found {i}"))?;
-        *o = tok
-            .parse::<f32>()
-            .map_err(|_| format!("{what}: '{tok}' is not a number"))?;
+        let tok = it.next().ok_or_else(|| format!("{what} needs {N} numbers, found {i}"))?;
+        *o = tok.parse::<f32>().map_err(|_| format!("{what}: '{tok}' is not a number"))?;
         if !o.is_finite() {
             return Err(format!("{what}: '{tok}' is not a finite number"));
         }
@@ -52,19 +45,11 @@ pub fn parse(text: &str) -> Result<Mesh, (usize, String)> {
         let l = raw.split('#').next().unwrap_or("").trim();
         let mut it = l.split_whitespace();
         match it.next() {
-            Some("v") => v.push(Vec3::from(
-                floats::<3>(&mut it, "vertex").map_err(|e| (line, e))?,
-            )),
-            Some("vn") => vn.push(Vec3::from(
-                floats::<3>(&mut it, "normal").map_err(|e| (line, e))?,
-            )),
+            Some("v") => v.push(Vec3::from(floats::<3>(&mut it, "vertex").map_err(|e| (line, e))?)),
+            Some("vn") => vn.push(Vec3::from(floats::<3>(&mut it, "normal").map_err(|e| (line, e))?)),
             Some("vt") => {
                 let uv = floats::<1>(&mut it, "texture coordinate").map_err(|e| (line, e))?;
-                let vv = it
-                    .next()
-                    .and_then(|t| t.parse::<f32>().ok())
-                    .filter(|x| x.is_finite())
-                    .unwrap_or(0.0);
+                let vv = it.next().and_then(|t| t.parse::<f32>().ok()).filter(|x| x.is_finite()).unwrap_or(0.0);
                 vt.push(Vec2::new(uv[0], vv));
             }
             Some("f") => {
@@ -78,24 +63,16 @@ pub fn parse(text: &str) -> Result<Mesh, (usize, String)> {
                         let Some(p) = parts.next() else { break };
                         if p.is_empty() {
                             if k == 0 {
-                                return Err((
-                                    line,
-                                    format!("face corner '{tok}' has no vertex index"),
-                                ));
+                                return Err((line, format!("face corner '{tok}' has no vertex index")));
                             }
                             continue;
                         }
-                        let n: i64 = p
-                            .parse()
-                            .map_err(|_| (line, format!("face index '{p}' is not an integer")))?;
+                        let n: i64 = p.parse().map_err(|_| (line, format!("face index '{p}' is not an integer")))?;
                         let resolved = if n > 0 { n - 1 } else { counts[k] as i64 + n };
                         if n == 0 || resolved < 0 || resolved >= counts[k] as i64 {
                             return Err((
                                 line,
-                                format!(
-                                    "face {} index {n} is out of range ({} defined so far)",
-                                    names[k], counts[k]
-                                ),
+                                format!("face {} index {n} is out of range ({} defined so far)", names[k], counts[k]),
                             ));
                         }
                         idx[k] = Some(resolved as usize);
@@ -112,21 +89,15 @@ pub fn parse(text: &str) -> Result<Mesh, (usize, String)> {
         }
     }
     if faces.is_empty() {
-        return Err((
-            text.lines().count().max(1),
-            "no faces in the file".to_string(),
-        ));
+        return Err((text.lines().count().max(1), "no faces in the file".to_string()));
     }
     let all_vt = corners.iter().all(|c| c[1].is_some()) && !vt.is_empty();
     let all_vn = corners.iter().all(|c| c[2].is_some()) && !vn.is_empty();
     let mut mesh = Mesh::default();
     let mut map: HashMap<(usize, usize, usize), u32> = HashMap::new();
     let mut vertex = |c: [Option<usize>; 3], mesh: &mut Mesh| -> u32 {
-        let key = (
-            c[0].unwrap_or(0),
-            if all_vt { c[1].unwrap_or(0) } else { 0 },
-            if all_vn { c[2].unwrap_or(0) } else { 0 },
-        );
+        let key =
+            (c[0].unwrap_or(0), if all_vt { c[1].unwrap_or(0) } else { 0 }, if all_vn { c[2].unwrap_or(0) } else { 0 });
         *map.entry(key).or_insert_with(|| {
             mesh.positions.push(v[key.0]);
             if all_vt {
@@ -161,8 +132,7 @@ mod tests {
 
     #[test]
     fn normals_and_uvs_are_unified() {
-        let m = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvn 0 0 1\nf 1/1/1 2/2/1 3/1/1\n")
-            .unwrap();
+        let m = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvn 0 0 1\nf 1/1/1 2/2/1 3/1/1\n").unwrap();
         assert_eq!(m.positions.len(), 3);
         assert_eq!(m.normals.as_ref().unwrap().len(), 3);
         assert_eq!(m.uvs.as_ref().unwrap()[1], Vec2::new(1.0, 0.0));
@@ -174,9 +144,6 @@ mod tests {
         assert_eq!(parse("v 0 0 0\nv nan 0 0\n").unwrap_err().0, 2);
         assert_eq!(parse("v 0 0 inf\n").unwrap_err().0, 1);
         assert!(parse("# nothing\n").is_err());
-        assert!(parse("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 x\n")
-            .unwrap_err()
-            .1
-            .contains("not an integer"));
+        assert!(parse("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 x\n").unwrap_err().1.contains("not an integer"));
     }
 }

@@ -99,20 +99,14 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, PErr> {
     let mut elements: Vec<Element> = Vec::new();
     let mut ended = false;
     while pos < bytes.len() {
-        let end = bytes[pos..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(bytes.len(), |e| pos + e);
+        let end = bytes[pos..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |e| pos + e);
         let line = String::from_utf8_lossy(&bytes[pos..end]).trim().to_string();
         pos = (end + 1).min(bytes.len());
         line_no += 1;
         let toks: Vec<&str> = line.split_whitespace().collect();
         if line_no == 1 {
             if line != "ply" {
-                return Err(header_err(
-                    1,
-                    "not a PLY file (the first line must be 'ply')",
-                ));
+                return Err(header_err(1, "not a PLY file (the first line must be 'ply')"));
             }
             continue;
         }
@@ -122,62 +116,38 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, PErr> {
                     Some("ascii") => Format::Ascii,
                     Some("binary_little_endian") => Format::Le,
                     Some("binary_big_endian") => Format::Be,
-                    other => {
-                        return Err(header_err(line_no, format!("unknown PLY format {other:?}")))
-                    }
+                    other => return Err(header_err(line_no, format!("unknown PLY format {other:?}"))),
                 });
             }
             Some("element") => {
                 let (Some(name), Some(count)) = (toks.get(1), toks.get(2)) else {
                     return Err(header_err(line_no, "'element' needs a name and a count"));
                 };
-                let count: u64 = count.parse().map_err(|_| {
-                    header_err(line_no, format!("element count '{count}' is not a count"))
-                })?;
-                elements.push(Element {
-                    name: name.to_string(),
-                    count,
-                    props: Vec::new(),
-                });
+                let count: u64 = count
+                    .parse()
+                    .map_err(|_| header_err(line_no, format!("element count '{count}' is not a count")))?;
+                elements.push(Element { name: name.to_string(), count, props: Vec::new() });
             }
             Some("property") => {
                 let Some(el) = elements.last_mut() else {
                     return Err(header_err(line_no, "'property' before any 'element'"));
                 };
                 let prop = if toks.get(1) == Some(&"list") {
-                    let (Some(ct), Some(it), Some(name)) = (toks.get(2), toks.get(3), toks.get(4))
-                    else {
-                        return Err(header_err(
-                            line_no,
-                            "'property list' needs a count type, an item type and a name",
-                        ));
+                    let (Some(ct), Some(it), Some(name)) = (toks.get(2), toks.get(3), toks.get(4)) else {
+                        return Err(header_err(line_no, "'property list' needs a count type, an item type and a name"));
                     };
-                    let ct = Scalar::parse(ct)
-                        .ok_or_else(|| header_err(line_no, format!("unknown type '{ct}'")))?;
+                    let ct = Scalar::parse(ct).ok_or_else(|| header_err(line_no, format!("unknown type '{ct}'")))?;
                     if matches!(ct, Scalar::F32 | Scalar::F64) {
-                        return Err(header_err(
-                            line_no,
-                            "a list count must have an integer type",
-                        ));
+                        return Err(header_err(line_no, "a list count must have an integer type"));
                     }
-                    let it = Scalar::parse(it)
-                        .ok_or_else(|| header_err(line_no, format!("unknown type '{it}'")))?;
-                    Property {
-                        name: name.to_string(),
-                        list: Some(ct),
-                        ty: it,
-                    }
+                    let it = Scalar::parse(it).ok_or_else(|| header_err(line_no, format!("unknown type '{it}'")))?;
+                    Property { name: name.to_string(), list: Some(ct), ty: it }
                 } else {
                     let (Some(ty), Some(name)) = (toks.get(1), toks.get(2)) else {
                         return Err(header_err(line_no, "'property' needs a type and a name"));
                     };
-                    let ty = Scalar::parse(ty)
-                        .ok_or_else(|| header_err(line_no, format!("unknown type '{ty}'")))?;
-                    Property {
-                        name: name.to_string(),
-                        list: None,
-                        ty,
-                    }
+                    let ty = Scalar::parse(ty).ok_or_else(|| header_err(line_no, format!("unknown type '{ty}'")))?;
+                    Property { name: name.to_string(), list: None, ty }
                 };
                 el.props.push(prop);
             }
@@ -186,12 +156,7 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, PErr> {
                 break;
             }
             Some("comment") | Some("obj_info") | None => {}
-            Some(other) => {
-                return Err(header_err(
-                    line_no,
-                    format!("unknown header keyword '{other}'"),
-                ))
-            }
+            Some(other) => return Err(header_err(line_no, format!("unknown header keyword '{other}'"))),
         }
     }
     if !ended {
@@ -206,10 +171,7 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, PErr> {
             // At least one digit and one separator per value.
             2 * el.props.len() as u64
         } else {
-            el.props
-                .iter()
-                .map(|p| p.list.map_or(p.ty.size(), |c| c.size()))
-                .sum()
+            el.props.iter().map(|p| p.list.map_or(p.ty.size(), |c| c.size())).sum()
         };
         let need = el.count.saturating_mul(per);
         if need > body {
@@ -224,16 +186,8 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, PErr> {
     }
 
     let mut reader: Box<dyn Values> = match format {
-        Format::Ascii => Box::new(AsciiValues {
-            text: &bytes[pos..],
-            pos: 0,
-            line: line_no + 1,
-        }),
-        Format::Le | Format::Be => Box::new(BinValues {
-            data: bytes,
-            pos,
-            big: format == Format::Be,
-        }),
+        Format::Ascii => Box::new(AsciiValues { text: &bytes[pos..], pos: 0, line: line_no + 1 }),
+        Format::Le | Format::Be => Box::new(BinValues { data: bytes, pos, big: format == Format::Be }),
     };
     let mut mesh = Mesh::default();
     for el in &elements {
@@ -279,14 +233,8 @@ impl Values for BinValues<'_> {
         self.pos += n;
         macro_rules! get {
             ($t:ty) => {{
-                let a = b
-                    .try_into()
-                    .map_err(|_| (None, "internal size mismatch".to_string()))?;
-                (if self.big {
-                    <$t>::from_be_bytes(a)
-                } else {
-                    <$t>::from_le_bytes(a)
-                }) as f64
+                let a = b.try_into().map_err(|_| (None, "internal size mismatch".to_string()))?;
+                (if self.big { <$t>::from_be_bytes(a) } else { <$t>::from_le_bytes(a) }) as f64
             }};
         }
         Ok(match ty {
@@ -337,17 +285,9 @@ impl Values for AsciiValues<'_> {
             ));
         }
         let tok = String::from_utf8_lossy(&self.text[start..self.pos]);
-        let v: f64 = tok.parse().map_err(|_| {
-            (
-                Some(Location::Line(self.line)),
-                format!("'{tok}' is not a number"),
-            )
-        })?;
+        let v: f64 = tok.parse().map_err(|_| (Some(Location::Line(self.line)), format!("'{tok}' is not a number")))?;
         if !matches!(ty, Scalar::F32 | Scalar::F64) && v.fract() != 0.0 {
-            return Err((
-                Some(Location::Line(self.line)),
-                format!("'{tok}' is not an integer"),
-            ));
+            return Err((Some(Location::Line(self.line)), format!("'{tok}' is not an integer")));
         }
         Ok(v)
     }
@@ -371,22 +311,12 @@ fn skip_property(p: &Property, r: &mut dyn Values) -> Result<(), PErr> {
 }
 
 fn read_vertices(el: &Element, r: &mut dyn Values, mesh: &mut Mesh) -> Result<(), PErr> {
-    let find = |names: &[&str]| {
-        el.props
-            .iter()
-            .position(|p| names.contains(&p.name.as_str()) && p.list.is_none())
-    };
+    let find = |names: &[&str]| el.props.iter().position(|p| names.contains(&p.name.as_str()) && p.list.is_none());
     let (Some(x), Some(y), Some(z)) = (find(&["x"]), find(&["y"]), find(&["z"])) else {
-        return Err((
-            None,
-            "the 'vertex' element has no x, y and z properties".into(),
-        ));
+        return Err((None, "the 'vertex' element has no x, y and z properties".into()));
     };
     let normal = (find(&["nx"]), find(&["ny"]), find(&["nz"]));
-    let uv = (
-        find(&["u", "s", "texture_u", "texture_s"]),
-        find(&["v", "t", "texture_v", "texture_t"]),
-    );
+    let uv = (find(&["u", "s", "texture_u", "texture_s"]), find(&["v", "t", "texture_v", "texture_t"]));
     let has_n = normal.0.is_some() && normal.1.is_some() && normal.2.is_some();
     let has_uv = uv.0.is_some() && uv.1.is_some();
     let count = el.count as usize;
@@ -405,25 +335,15 @@ fn read_vertices(el: &Element, r: &mut dyn Values, mesh: &mut Mesh) -> Result<()
         }
         let pos = Vec3::new(vals[x] as f32, vals[y] as f32, vals[z] as f32);
         if !pos.is_finite() {
-            return Err((
-                Some(loc),
-                format!("vertex {i} has a NaN or infinite coordinate"),
-            ));
+            return Err((Some(loc), format!("vertex {i} has a NaN or infinite coordinate")));
         }
         mesh.positions.push(pos);
         if has_n {
-            let (a, b, c) = (
-                normal.0.unwrap_or(0),
-                normal.1.unwrap_or(0),
-                normal.2.unwrap_or(0),
-            );
+            let (a, b, c) = (normal.0.unwrap_or(0), normal.1.unwrap_or(0), normal.2.unwrap_or(0));
             normals.push(Vec3::new(vals[a] as f32, vals[b] as f32, vals[c] as f32));
         }
         if has_uv {
-            uvs.push(Vec2::new(
-                vals[uv.0.unwrap_or(0)] as f32,
-                vals[uv.1.unwrap_or(0)] as f32,
-            ));
+            uvs.push(Vec2::new(vals[uv.0.unwrap_or(0)] as f32, vals[uv.1.unwrap_or(0)] as f32));
         }
     }
     if has_n {
@@ -436,15 +356,10 @@ fn read_vertices(el: &Element, r: &mut dyn Values, mesh: &mut Mesh) -> Result<()
 }
 
 fn read_faces(el: &Element, r: &mut dyn Values, mesh: &mut Mesh) -> Result<(), PErr> {
-    let Some(fi) = el
-        .props
-        .iter()
-        .position(|p| p.list.is_some() && (p.name == "vertex_indices" || p.name == "vertex_index"))
+    let Some(fi) =
+        el.props.iter().position(|p| p.list.is_some() && (p.name == "vertex_indices" || p.name == "vertex_index"))
     else {
-        return Err((
-            None,
-            "the 'face' element has no 'vertex_indices' list".into(),
-        ));
+        return Err((None, "the 'face' element has no 'vertex_indices' list".into()));
     };
     mesh.indices.reserve(el.count as usize);
     let nverts = mesh.positions.len() as f64;
@@ -467,10 +382,7 @@ fn read_faces(el: &Element, r: &mut dyn Values, mesh: &mut Mesh) -> Result<(), P
                 if v < 0.0 || v >= nverts {
                     return Err((
                         Some(loc),
-                        format!(
-                            "face {i} uses vertex index {v}, but the file has {} vertices",
-                            mesh.positions.len()
-                        ),
+                        format!("face {i} uses vertex index {v}, but the file has {} vertices", mesh.positions.len()),
                     ));
                 }
                 poly.push(v as u32);
@@ -536,10 +448,7 @@ mod tests {
     fn bad_headers() {
         assert!(parse(b"").is_err());
         assert!(parse(b"plx\n").is_err());
-        assert!(parse(b"ply\nformat ascii 1.0\nelement vertex 1\n")
-            .unwrap_err()
-            .1
-            .contains("end_header"));
+        assert!(parse(b"ply\nformat ascii 1.0\nelement vertex 1\n").unwrap_err().1.contains("end_header"));
         assert!(parse(b"ply\nformat ascii 1.0\nelement vertex -1\nend_header\n").is_err());
     }
 }

@@ -18,10 +18,7 @@ pub fn read(path: &Path) -> Result<Vec<Ray>, Error> {
         return Err(Error::at(
             path,
             Location::Byte((bytes.len() / 24 * 24) as u64),
-            format!(
-                "{} bytes is not a whole number of rays (24 bytes each): truncated?",
-                bytes.len()
-            ),
+            format!("{} bytes is not a whole number of rays (24 bytes each): truncated?", bytes.len()),
         ));
     }
     let mut rays = Vec::with_capacity(bytes.len() / 24);

@@ -90,16 +90,14 @@ impl<'de> Deserialize<'de> for Color {
             One(f32),
             Three([f32; 3]),
         }
-        let c = C::deserialize(d)
-            .map_err(|_| serde::de::Error::custom("expected a colour: [r, g, b] or one number"))?;
+        let c =
+            C::deserialize(d).map_err(|_| serde::de::Error::custom("expected a colour: [r, g, b] or one number"))?;
         let v = match c {
             C::One(x) => Rgb::splat(x),
             C::Three(a) => Rgb::from(a),
         };
         if !v.is_finite() || v.min_element() < 0.0 {
-            return Err(serde::de::Error::custom(
-                "colour components must be finite and not negative",
-            ));
+            return Err(serde::de::Error::custom("colour components must be finite and not negative"));
         }
         Ok(Color(v))
     }
@@ -124,7 +122,9 @@ impl<'de> Deserialize<'de> for Tex {
             Checker(Checker),
         }
         match T::deserialize(d).map_err(|_| {
-            serde::de::Error::custom("expected a colour ([r, g, b] or one number) or { checker = [colour, colour], scale = n }")
+            serde::de::Error::custom(
+                "expected a colour ([r, g, b] or one number) or { checker = [colour, colour], scale = n }",
+            )
         })? {
             T::C(c) => Ok(Tex(material::Texture::Constant(c.0))),
             T::Checker(c) => {
@@ -145,9 +145,7 @@ impl<'de> Deserialize<'de> for Num {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let v = f32::deserialize(d)?;
         if !v.is_finite() {
-            return Err(serde::de::Error::custom(format!(
-                "expected a finite number, found {v}"
-            )));
+            return Err(serde::de::Error::custom(format!("expected a finite number, found {v}")));
         }
         Ok(Num(v))
     }
@@ -164,23 +162,13 @@ impl<'de> Deserialize<'de> for Ior {
             N(f32),
             S(String),
         }
-        let names = || {
-            material::IORS
-                .iter()
-                .map(|p| p.0)
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
+        let names = || material::IORS.iter().map(|p| p.0).collect::<Vec<_>>().join(", ");
         let v = match I::deserialize(d).map_err(|_| {
-            serde::de::Error::custom(format!(
-                "expected an index of refraction: a number or one of {}",
-                names()
-            ))
+            serde::de::Error::custom(format!("expected an index of refraction: a number or one of {}", names()))
         })? {
             I::N(v) => v,
-            I::S(s) => material::named_ior(&s).ok_or_else(|| {
-                serde::de::Error::custom(format!("unknown IOR preset '{s}' (known: {})", names()))
-            })?,
+            I::S(s) => material::named_ior(&s)
+                .ok_or_else(|| serde::de::Error::custom(format!("unknown IOR preset '{s}' (known: {})", names())))?,
         };
         if !(v.is_finite() && v > 0.0) {
             return Err(serde::de::Error::custom(format!(
@@ -353,13 +341,7 @@ impl Ctx<'_> {
         match v {
             None => Ok(default),
             Some(s) if (lo..=hi).contains(s.get_ref()) => Ok(*s.get_ref()),
-            Some(s) => Err(self.err(
-                s.span(),
-                format!(
-                    "'{key}' must be between {lo} and {hi}, found {}",
-                    s.get_ref()
-                ),
-            )),
+            Some(s) => Err(self.err(s.span(), format!("'{key}' must be between {lo} and {hi}, found {}", s.get_ref()))),
         }
     }
 
@@ -367,13 +349,9 @@ impl Ctx<'_> {
         match v {
             None => Ok(default),
             Some(s) if (lo..=hi).contains(&s.get_ref().0) => Ok(s.get_ref().0),
-            Some(s) => Err(self.err(
-                s.span(),
-                format!(
-                    "'{key}' must be between {lo} and {hi}, found {}",
-                    s.get_ref().0
-                ),
-            )),
+            Some(s) => {
+                Err(self.err(s.span(), format!("'{key}' must be between {lo} and {hi}, found {}", s.get_ref().0)))
+            }
         }
     }
 }
@@ -386,11 +364,7 @@ fn val<T: Copy>(v: &S<T>) -> Option<T> {
 pub fn load(path: &Path) -> Result<LoadedScene, Error> {
     let bytes = crate::read_file(path)?;
     let src = String::from_utf8(bytes).map_err(|e| {
-        Error::at(
-            path,
-            Location::Byte(e.utf8_error().valid_up_to() as u64),
-            "the file is not valid UTF-8",
-        )
+        Error::at(path, Location::Byte(e.utf8_error().valid_up_to() as u64), "the file is not valid UTF-8")
     })?;
     parse(&src, path)
 }
@@ -413,40 +387,24 @@ pub fn parse(src: &str, path: &Path) -> Result<LoadedScene, Error> {
     })?;
     let settings = render_settings(&cx, file.render.as_ref())?;
     let (background, ambient) = match &file.render {
-        Some(r) => (
-            r.background.map_or(Rgb::ZERO, |c| c.0),
-            r.ambient.map_or(Rgb::ZERO, |c| c.0),
-        ),
+        Some(r) => (r.background.map_or(Rgb::ZERO, |c| c.0), r.ambient.map_or(Rgb::ZERO, |c| c.0)),
         None => (Rgb::ZERO, Rgb::ZERO),
     };
 
-    let mut materials = vec![Material::Diffuse {
-        albedo: Rgb::splat(0.8).into(),
-    }];
+    let mut materials = vec![Material::Diffuse { albedo: Rgb::splat(0.8).into() }];
     let mut material_ids: HashMap<&str, usize> = HashMap::new();
     for (name, def) in &file.materials {
         materials.push(material_def(&cx, def)?);
         material_ids.insert(name.as_str(), materials.len() - 1);
     }
-    let lights = file
-        .lights
-        .iter()
-        .map(|l| light_def(&cx, l))
-        .collect::<Result<Vec<_>, _>>()?;
+    let lights = file.lights.iter().map(|l| light_def(&cx, l)).collect::<Result<Vec<_>, _>>()?;
 
     let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut geometries: Vec<Geometry> = Vec::new();
     let mut mesh_cache: HashMap<(PathBuf, bool), usize> = HashMap::new();
     let mut objects = Vec::new();
     for s in &file.shapes {
-        objects.push(shape_def(
-            &cx,
-            s,
-            &base_dir,
-            &material_ids,
-            &mut geometries,
-            &mut mesh_cache,
-        )?);
+        objects.push(shape_def(&cx, s, &base_dir, &material_ids, &mut geometries, &mut mesh_cache)?);
     }
 
     let mut scene = Scene {
@@ -454,13 +412,8 @@ pub fn parse(src: &str, path: &Path) -> Result<LoadedScene, Error> {
         objects,
         materials,
         lights,
-        camera: Camera::look_at(
-            Vec3::Z,
-            Vec3::ZERO,
-            Vec3::Y,
-            Projection::Perspective { fov_y: 40.0 },
-        )
-        .ok_or_else(|| Error::new(path, "internal: default camera"))?,
+        camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 40.0 })
+            .ok_or_else(|| Error::new(path, "internal: default camera"))?,
         background,
         ambient,
     };
@@ -472,11 +425,7 @@ pub fn parse(src: &str, path: &Path) -> Result<LoadedScene, Error> {
         (None, None) => return Err(Error::new(path, "internal: no camera")),
     };
     scene.check().map_err(|e| Error::new(path, e))?;
-    Ok(LoadedScene {
-        scene,
-        settings,
-        frame,
-    })
+    Ok(LoadedScene { scene, settings, frame })
 }
 
 fn render_settings(cx: &Ctx, r: Option<&RenderDef>) -> Result<SceneSettings, Error> {
@@ -487,18 +436,9 @@ fn render_settings(cx: &Ctx, r: Option<&RenderDef>) -> Result<SceneSettings, Err
     s.spp = cx.int(&r.spp, 1, 1 << 20, "spp", s.spp as i64)? as u32;
     s.seed = r.seed.unwrap_or(0);
     s.max_depth = cx.int(&r.max_depth, 0, 1000, "max_depth", s.max_depth as i64)? as u32;
-    s.min_attenuation = cx.num(
-        &r.min_attenuation,
-        0.0,
-        1.0,
-        "min_attenuation",
-        s.min_attenuation,
-    )?;
+    s.min_attenuation = cx.num(&r.min_attenuation, 0.0, 1.0, "min_attenuation", s.min_attenuation)?;
     if let Some(a) = &r.accel {
-        s.accel = a
-            .get_ref()
-            .parse()
-            .map_err(|e: String| cx.err(a.span(), e))?;
+        s.accel = a.get_ref().parse().map_err(|e: String| cx.err(a.span(), e))?;
     }
     let radius = |d: f32| cx.num(&r.filter_radius, 0.0, 16.0, "filter_radius", d);
     s.filter = match r.filter.as_ref().map(|f| (f.get_ref().as_str(), f.span())) {
@@ -508,24 +448,11 @@ fn render_settings(cx: &Ctx, r: Option<&RenderDef>) -> Result<SceneSettings, Err
             Filter::gaussian(radius.max(1e-3), sigma)
         }
         Some((kind, span)) => {
-            cx.reject(
-                &r.filter_sigma,
-                "filter_sigma",
-                &format!("the {kind} filter"),
-            )?;
+            cx.reject(&r.filter_sigma, "filter_sigma", &format!("the {kind} filter"))?;
             match kind {
-                "box" => Filter::Box {
-                    radius: radius(0.5)?,
-                },
-                "tent" => Filter::Tent {
-                    radius: radius(1.0)?,
-                },
-                _ => {
-                    return Err(cx.err(
-                        span,
-                        format!("unknown filter '{kind}' (expected box, tent or gaussian)"),
-                    ))
-                }
+                "box" => Filter::Box { radius: radius(0.5)? },
+                "tent" => Filter::Tent { radius: radius(1.0)? },
+                _ => return Err(cx.err(span, format!("unknown filter '{kind}' (expected box, tent or gaussian)"))),
             }
         }
     };
@@ -535,10 +462,7 @@ fn render_settings(cx: &Ctx, r: Option<&RenderDef>) -> Result<SceneSettings, Err
 fn camera_def(cx: &Ctx, c: &Spanned<CameraDef>) -> Result<Camera, Error> {
     let span = c.span();
     let c = c.get_ref();
-    let kind = c
-        .kind
-        .as_ref()
-        .map_or("perspective", |k| k.get_ref().as_str());
+    let kind = c.kind.as_ref().map_or("perspective", |k| k.get_ref().as_str());
     let eye = val(&c.eye).map_or(Vec3::new(0.0, 0.0, 5.0), |v| v.0);
     let target = val(&c.look_at).map_or(Vec3::ZERO, |v| v.0);
     let up = val(&c.up).map_or(Vec3::Y, |v| v.0);
@@ -554,39 +478,25 @@ fn camera_def(cx: &Ctx, c: &Spanned<CameraDef>) -> Result<Camera, Error> {
         "thinlens" => {
             cx.reject(&c.scale, "scale", "a thin-lens camera")?;
             let aperture = cx.num(&c.aperture, 0.0, f32::MAX, "aperture", 0.0)?;
-            let focus = cx.num(
-                &c.focus_distance,
-                1e-6,
-                f32::MAX,
-                "focus_distance",
-                (target - eye).length(),
-            )?;
-            Projection::ThinLens {
-                fov_y: fov()?,
-                aperture,
-                focus_distance: focus,
-            }
+            let focus = cx.num(&c.focus_distance, 1e-6, f32::MAX, "focus_distance", (target - eye).length())?;
+            Projection::ThinLens { fov_y: fov()?, aperture, focus_distance: focus }
         }
         "orthographic" => {
             let what = "an orthographic camera";
             cx.reject(&c.fov, "fov", what)?;
             cx.reject(&c.aperture, "aperture", what)?;
             cx.reject(&c.focus_distance, "focus_distance", what)?;
-            Projection::Orthographic {
-                half_height: cx.num(&c.scale, 1e-9, f32::MAX, "scale", 1.0)?,
-            }
+            Projection::Orthographic { half_height: cx.num(&c.scale, 1e-9, f32::MAX, "scale", 1.0)? }
         }
         other => {
             let s = c.kind.as_ref().map_or(span.clone(), |k| k.span());
-            return Err(cx.err(s, format!("unknown camera type '{other}' (expected perspective, thinlens or orthographic)")));
+            return Err(
+                cx.err(s, format!("unknown camera type '{other}' (expected perspective, thinlens or orthographic)"))
+            );
         }
     };
-    Camera::look_at(eye, target, up, projection).ok_or_else(|| {
-        cx.err(
-            span,
-            "the camera's eye and look_at coincide, or its view direction is parallel to 'up'",
-        )
-    })
+    Camera::look_at(eye, target, up, projection)
+        .ok_or_else(|| cx.err(span, "the camera's eye and look_at coincide, or its view direction is parallel to 'up'"))
 }
 
 fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error> {
@@ -607,7 +517,9 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
         _ => {
             return Err(cx.err(
                 m.kind.span(),
-                format!("unknown material type '{kind}' (expected diffuse, glossy, conductor, mirror, dielectric or glazed)"),
+                format!(
+                "unknown material type '{kind}' (expected diffuse, glossy, conductor, mirror, dielectric or glazed)"
+            ),
             ))
         }
     };
@@ -636,14 +548,15 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
             Some(s) if s.get_ref().0 >= 1.0 => Ok(s.get_ref().0),
             Some(s) => Err(cx.err(
                 s.span(),
-                format!("an index of refraction below 1 ({}) is not supported; put the denser medium inside", s.get_ref().0),
+                format!(
+                    "an index of refraction below 1 ({}) is not supported; put the denser medium inside",
+                    s.get_ref().0
+                ),
             )),
         }
     };
     Ok(match kind {
-        "diffuse" => Material::Diffuse {
-            albedo: tex(Rgb::splat(0.8)),
-        },
+        "diffuse" => Material::Diffuse { albedo: tex(Rgb::splat(0.8)) },
         "glossy" => Material::Glossy {
             albedo: tex(Rgb::splat(0.5)),
             specular: color(&m.specular, Rgb::ONE),
@@ -655,40 +568,18 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
                 (Some(name), None, None) => material::metal(name.get_ref()).ok_or_else(|| {
                     cx.err(
                         name.span(),
-                        format!(
-                            "unknown metal '{}' (expected gold, silver, copper or aluminium)",
-                            name.get_ref()
-                        ),
+                        format!("unknown metal '{}' (expected gold, silver, copper or aluminium)", name.get_ref()),
                     )
                 })?,
                 (None, Some(eta), Some(k)) => (eta.get_ref().0, k.get_ref().0),
-                (None, None, None) => {
-                    material::metal("silver").map_or((Rgb::ONE, Rgb::ZERO), |v| v)
-                }
-                _ => {
-                    return Err(cx.err(
-                        def.span(),
-                        "a conductor takes either 'metal' or both 'eta' and 'k'",
-                    ))
-                }
+                (None, None, None) => material::metal("silver").map_or((Rgb::ONE, Rgb::ZERO), |v| v),
+                _ => return Err(cx.err(def.span(), "a conductor takes either 'metal' or both 'eta' and 'k'")),
             };
-            Material::Conductor {
-                eta,
-                k,
-                roughness: roughness(0.0)?,
-            }
+            Material::Conductor { eta, k, roughness: roughness(0.0)? }
         }
-        "mirror" => Material::Mirror {
-            reflectance: color(&m.reflectance, Rgb::ONE),
-        },
-        "dielectric" => Material::Dielectric {
-            ior: ior(1.5)?,
-            transmittance: color(&m.transmittance, Rgb::ONE),
-        },
-        _ => Material::Glazed {
-            ior: ior(1.5)?,
-            base: color(&m.base, Rgb::ZERO),
-        },
+        "mirror" => Material::Mirror { reflectance: color(&m.reflectance, Rgb::ONE) },
+        "dielectric" => Material::Dielectric { ior: ior(1.5)?, transmittance: color(&m.transmittance, Rgb::ONE) },
+        _ => Material::Glazed { ior: ior(1.5)?, base: color(&m.base, Rgb::ZERO) },
     })
 }
 
@@ -697,9 +588,7 @@ fn light_def(cx: &Ctx, def: &Spanned<LightDef>) -> Result<Light, Error> {
     let kind = l.kind.get_ref().as_str();
     let what = format!("a '{kind}' light");
     let need = |v: &S<V3>, key: &str| -> Result<Vec3, Error> {
-        val(v)
-            .map(|v| v.0)
-            .ok_or_else(|| cx.err(def.span(), format!("{what} needs '{key}'")))
+        val(v).map(|v| v.0).ok_or_else(|| cx.err(def.span(), format!("{what} needs '{key}'")))
     };
     let color = |f: &S<Color>| val(f).map_or(Rgb::ONE, |c| c.0);
     match kind {
@@ -749,27 +638,18 @@ fn light_def(cx: &Ctx, def: &Spanned<LightDef>) -> Result<Light, Error> {
     }
 }
 
-fn transform_def(
-    cx: &Ctx,
-    ops: &Spanned<Vec<Spanned<TransformOp>>>,
-) -> Result<Option<Transform>, Error> {
+fn transform_def(cx: &Ctx, ops: &Spanned<Vec<Spanned<TransformOp>>>) -> Result<Option<Transform>, Error> {
     let mut m = Affine3A::IDENTITY;
     for op in ops.get_ref() {
         let o = op.get_ref();
-        let n = [
-            o.translate.is_some(),
-            o.scale.is_some(),
-            o.rotate.is_some(),
-            o.matrix.is_some(),
-        ]
-        .iter()
-        .filter(|b| **b)
-        .count();
+        let n = [o.translate.is_some(), o.scale.is_some(), o.rotate.is_some(), o.matrix.is_some()]
+            .iter()
+            .filter(|b| **b)
+            .count();
         if n != 1 {
-            return Err(cx.err(
-                op.span(),
-                "each transform step needs exactly one of translate, scale, rotate or matrix",
-            ));
+            return Err(
+                cx.err(op.span(), "each transform step needs exactly one of translate, scale, rotate or matrix")
+            );
         }
         let step = if let Some(t) = o.translate {
             Affine3A::from_translation(t.0)
@@ -780,20 +660,13 @@ fn transform_def(
             };
             Affine3A::from_scale(v)
         } else if let Some(r) = &o.rotate {
-            let axis = r
-                .axis
-                .0
-                .try_normalize()
-                .ok_or_else(|| cx.err(op.span(), "the rotation axis is zero"))?;
+            let axis = r.axis.0.try_normalize().ok_or_else(|| cx.err(op.span(), "the rotation axis is zero"))?;
             Affine3A::from_quat(Quat::from_axis_angle(axis, r.angle.0.to_radians()))
         } else {
             let a = o.matrix.unwrap_or_default();
             // Row-major 4×4; the last row must be 0 0 0 1.
             if a[12] != 0.0 || a[13] != 0.0 || a[14] != 0.0 || a[15] != 1.0 {
-                return Err(cx.err(
-                    op.span(),
-                    "the matrix's last row must be [0, 0, 0, 1] (affine transforms only)",
-                ));
+                return Err(cx.err(op.span(), "the matrix's last row must be [0, 0, 0, 1] (affine transforms only)"));
             }
             let m4 = glam::Mat4::from_cols_array(&a).transpose();
             Affine3A::from_mat4(m4)
@@ -803,10 +676,7 @@ fn transform_def(
     match Transform::try_new(m) {
         Some(t) if t.is_identity() => Ok(None),
         Some(t) => Ok(Some(t)),
-        None => Err(cx.err(
-            ops.span(),
-            "the transform is singular (a zero scale?) or not finite",
-        )),
+        None => Err(cx.err(ops.span(), "the transform is singular (a zero scale?) or not finite")),
     }
 }
 
@@ -827,10 +697,9 @@ fn shape_def(
         "box" => &["min", "max"],
         "mesh" => &["file", "smooth", "positions", "indices"],
         _ => {
-            return Err(cx.err(
-                s.kind.span(),
-                format!("unknown shape type '{kind}' (expected sphere, quad, box or mesh)"),
-            ))
+            return Err(
+                cx.err(s.kind.span(), format!("unknown shape type '{kind}' (expected sphere, quad, box or mesh)"))
+            )
         }
     };
     let present: [(&str, Option<Range<usize>>); 10] = [
@@ -845,10 +714,7 @@ fn shape_def(
         ("smooth", s.smooth.as_ref().map(|v| v.span())),
         ("positions", s.positions.as_ref().map(|v| v.span())),
     ];
-    for (key, span) in present
-        .into_iter()
-        .chain([("indices", s.indices.as_ref().map(|v| v.span()))])
-    {
+    for (key, span) in present.into_iter().chain([("indices", s.indices.as_ref().map(|v| v.span()))]) {
         if let Some(span) = span {
             if !allowed.contains(&key) {
                 return Err(cx.err(span, format!("'{key}' does not apply to {what}")));
@@ -856,9 +722,7 @@ fn shape_def(
         }
     }
     let need = |v: &S<V3>, key: &str| -> Result<Vec3, Error> {
-        val(v)
-            .map(|v| v.0)
-            .ok_or_else(|| cx.err(def.span(), format!("{what} needs '{key}'")))
+        val(v).map(|v| v.0).ok_or_else(|| cx.err(def.span(), format!("{what} needs '{key}'")))
     };
     let mut push = |g: Geometry| {
         geometries.push(g);
@@ -867,17 +731,10 @@ fn shape_def(
     let geometry = match kind {
         "sphere" => {
             let radius = cx.num(&s.radius, 1e-30, f32::MAX, "radius", 1.0)?;
-            push(Geometry::Sphere(Sphere {
-                center: val(&s.center).map_or(Vec3::ZERO, |v| v.0),
-                radius,
-            }))
+            push(Geometry::Sphere(Sphere { center: val(&s.center).map_or(Vec3::ZERO, |v| v.0), radius }))
         }
         "quad" => {
-            let (c, e1, e2) = (
-                need(&s.corner, "corner")?,
-                need(&s.edge1, "edge1")?,
-                need(&s.edge2, "edge2")?,
-            );
+            let (c, e1, e2) = (need(&s.corner, "corner")?, need(&s.edge1, "edge1")?, need(&s.edge2, "edge2")?);
             if e1.cross(e2).length_squared() == 0.0 {
                 return Err(cx.err(def.span(), "the quad's edges are parallel or zero"));
             }
@@ -899,9 +756,8 @@ fn shape_def(
                     if let Some(&g) = mesh_cache.get(&key) {
                         g
                     } else {
-                        let mut mesh = crate::read_mesh(&p).map_err(|e| {
-                            cx.err(f.span(), format!("cannot load mesh '{}': {e}", f.get_ref()))
-                        })?;
+                        let mut mesh = crate::read_mesh(&p)
+                            .map_err(|e| cx.err(f.span(), format!("cannot load mesh '{}': {e}", f.get_ref())))?;
                         if !smooth {
                             mesh.normals = None;
                         }
@@ -921,35 +777,23 @@ fn shape_def(
                         if t.iter().any(|&i| i < 0 || i >= mesh.positions.len() as i64) {
                             return Err(cx.err(
                                 idx.span(),
-                                format!(
-                                    "index triple {t:?} is out of range ({} positions)",
-                                    mesh.positions.len()
-                                ),
+                                format!("index triple {t:?} is out of range ({} positions)", mesh.positions.len()),
                             ));
                         }
                         mesh.indices.push(t.map(|i| i as u32));
                     }
-                    mesh.validate()
-                        .map_err(|e| cx.err(def.span(), e.to_string()))?;
+                    mesh.validate().map_err(|e| cx.err(def.span(), e.to_string()))?;
                     push(Geometry::Mesh(mesh))
                 }
-                _ => {
-                    return Err(cx.err(
-                        def.span(),
-                        "a mesh needs either 'file' or both 'positions' and 'indices'",
-                    ))
-                }
+                _ => return Err(cx.err(def.span(), "a mesh needs either 'file' or both 'positions' and 'indices'")),
             }
         }
     };
     let material = match &s.material {
         None => 0,
-        Some(m) => *material_ids.get(m.get_ref().as_str()).ok_or_else(|| {
-            cx.err(
-                m.span(),
-                format!("no material named '{}' in [materials]", m.get_ref()),
-            )
-        })?,
+        Some(m) => *material_ids
+            .get(m.get_ref().as_str())
+            .ok_or_else(|| cx.err(m.span(), format!("no material named '{}' in [materials]", m.get_ref())))?,
     };
     let transform = match &s.transform {
         Some(t) => transform_def(cx, t)?,
@@ -958,29 +802,16 @@ fn shape_def(
     let emission = val(&s.emission).map_or(Rgb::ZERO, |c| c.0);
     let light_samples = cx.int(&s.light_samples, 1, 4096, "light_samples", 8)? as u32;
     if emission == Rgb::ZERO {
-        cx.reject(
-            &s.light_samples,
-            "light_samples",
-            "a shape without 'emission'",
-        )?;
+        cx.reject(&s.light_samples, "light_samples", "a shape without 'emission'")?;
     }
     if emission != Rgb::ZERO && kind == "sphere" {
         if let Some(t) = &transform {
             if t.uniform_scale().is_none() {
-                return Err(cx.err(
-                    def.span(),
-                    "an emissive sphere may only be scaled uniformly",
-                ));
+                return Err(cx.err(def.span(), "an emissive sphere may only be scaled uniformly"));
             }
         }
     }
-    Ok(Object {
-        geometry,
-        transform,
-        material,
-        emission,
-        light_samples,
-    })
+    Ok(Object { geometry, transform, material, emission, light_samples })
 }
 
 /// A camera looking at the box `b` from the front, a little from above and the right.
@@ -994,11 +825,7 @@ pub fn auto_camera(b: Aabb, width: u32, height: u32) -> Option<Camera> {
     let aspect = width as f32 / height.max(1) as f32;
     // Distance at which a sphere of radius r fits the narrower field of view.
     let half = (fov.to_radians() * 0.5).tan().atan();
-    let half_min = if aspect < 1.0 {
-        (half.tan() * aspect).atan()
-    } else {
-        half
-    };
+    let half_min = if aspect < 1.0 { (half.tan() * aspect).atan() } else { half };
     let dist = 1.05 * r / half_min.sin();
     let eye = c + Vec3::new(0.3, 0.4, 1.0).normalize() * dist;
     Camera::look_at(eye, c, Vec3::Y, Projection::Perspective { fov_y: fov })
@@ -1018,22 +845,14 @@ pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
             roughness: 0.25,
             ior: 1.5,
         },
-        Material::Diffuse {
-            albedo: Rgb::splat(0.5).into(),
-        },
-        Material::Diffuse {
-            albedo: Rgb::ZERO.into(),
-        },
+        Material::Diffuse { albedo: Rgb::splat(0.5).into() },
+        Material::Diffuse { albedo: Rgb::ZERO.into() },
     ];
     let floor_y = b.min.y;
     let s = 8.0 * r;
     let light_size = 1.5 * r;
     let light_y = c.y + 3.0 * r;
-    let light_corner = Vec3::new(
-        c.x - light_size / 2.0 + r,
-        light_y,
-        c.z - light_size / 2.0 + r,
-    );
+    let light_corner = Vec3::new(c.x - light_size / 2.0 + r, light_y, c.z - light_size / 2.0 + r);
     let geometries = vec![
         Geometry::Mesh(mesh),
         Geometry::Mesh(Mesh::quad(
@@ -1042,37 +861,15 @@ pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
             Vec3::new(0.0, 0.0, -2.0 * s),
         )),
         // Facing down: edge1 × edge2 = -y.
-        Geometry::Mesh(Mesh::quad(
-            light_corner,
-            Vec3::new(0.0, 0.0, light_size),
-            Vec3::new(light_size, 0.0, 0.0),
-        )),
+        Geometry::Mesh(Mesh::quad(light_corner, Vec3::new(0.0, 0.0, light_size), Vec3::new(light_size, 0.0, 0.0))),
     ];
     // Radiance chosen so the light delivers an irradiance of about 3 at the mesh's centre.
     let dist2 = (light_y - c.y).powi(2) + 2.0 * r * r;
     let emission = Rgb::splat(3.0 * dist2 / (light_size * light_size));
     let objects = vec![
-        Object {
-            geometry: 0,
-            transform: None,
-            material: 0,
-            emission: Rgb::ZERO,
-            light_samples: 1,
-        },
-        Object {
-            geometry: 1,
-            transform: None,
-            material: 1,
-            emission: Rgb::ZERO,
-            light_samples: 1,
-        },
-        Object {
-            geometry: 2,
-            transform: None,
-            material: 2,
-            emission,
-            light_samples: 16,
-        },
+        Object { geometry: 0, transform: None, material: 0, emission: Rgb::ZERO, light_samples: 1 },
+        Object { geometry: 1, transform: None, material: 1, emission: Rgb::ZERO, light_samples: 1 },
+        Object { geometry: 2, transform: None, material: 2, emission, light_samples: 16 },
     ];
     let mut scene = Scene {
         geometries,
@@ -1082,22 +879,13 @@ pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
             direction: Vec3::new(0.4, -0.5, -1.0).normalize(),
             irradiance: Rgb::splat(0.4),
         }],
-        camera: Camera::look_at(
-            Vec3::Z,
-            Vec3::ZERO,
-            Vec3::Y,
-            Projection::Perspective { fov_y: 40.0 },
-        )
-        .ok_or_else(|| Error::new(path, "internal: default camera"))?,
+        camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 40.0 })
+            .ok_or_else(|| Error::new(path, "internal: default camera"))?,
         background: Rgb::new(0.2, 0.22, 0.25),
         ambient: Rgb::splat(0.08),
     };
     // Frame the mesh itself, not the floor.
     scene.camera = auto_camera(b, settings.width, settings.height)
         .ok_or_else(|| Error::new(path, "the mesh has no extent to frame"))?;
-    Ok(LoadedScene {
-        scene,
-        settings,
-        frame: Some(b),
-    })
+    Ok(LoadedScene { scene, settings, frame: Some(b) })
 }

@@ -2,9 +2,7 @@
 //! (meshes, instances with transforms, spheres), plus watertightness and instance boxes.
 
 use glam::{Affine3A, Quat, Vec3};
-use snell_core::accel::{
-    Accel, AccelKind, AccelParams, AnyWorld, Brute, Bvh, BvhParams, SplitMethod,
-};
+use snell_core::accel::{Accel, AccelKind, AccelParams, AnyWorld, Brute, Bvh, BvhParams, SplitMethod};
 use snell_core::camera::{Camera, Projection};
 use snell_core::geometry::{Ray, Transform};
 use snell_core::material::Material;
@@ -14,38 +12,20 @@ use snell_core::shape::{Mesh, Sphere};
 use snell_core::Rgb;
 
 fn rand_vec(rng: &mut Pcg32, scale: f32) -> Vec3 {
-    Vec3::new(
-        rng.next_f32() - 0.5,
-        rng.next_f32() - 0.5,
-        rng.next_f32() - 0.5,
-    ) * (2.0 * scale)
+    Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5) * (2.0 * scale)
 }
 
 fn object(geometry: usize, transform: Option<Transform>) -> Object {
-    Object {
-        geometry,
-        transform,
-        material: 0,
-        emission: Rgb::ZERO,
-        light_samples: 1,
-    }
+    Object { geometry, transform, material: 0, emission: Rgb::ZERO, light_samples: 1 }
 }
 
 pub fn scene_of(geometries: Vec<Geometry>, objects: Vec<Object>) -> Scene {
     Scene {
         geometries,
         objects,
-        materials: vec![Material::Diffuse {
-            albedo: Rgb::ONE.into(),
-        }],
+        materials: vec![Material::Diffuse { albedo: Rgb::ONE.into() }],
         lights: vec![],
-        camera: Camera::look_at(
-            Vec3::Z,
-            Vec3::ZERO,
-            Vec3::Y,
-            Projection::Perspective { fov_y: 40.0 },
-        )
-        .unwrap(),
+        camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 40.0 }).unwrap(),
         background: Rgb::ZERO,
         ambient: Rgb::ZERO,
     }
@@ -66,11 +46,7 @@ fn adversarial_scene(seed: u64) -> Scene {
     // Coplanar, axis-aligned triangles in the plane z = 0.5.
     for i in 0..20 {
         let x = i as f32 * 0.2 - 2.0;
-        soup.positions.extend([
-            Vec3::new(x, -1.0, 0.5),
-            Vec3::new(x + 0.3, -1.0, 0.5),
-            Vec3::new(x, 1.0, 0.5),
-        ]);
+        soup.positions.extend([Vec3::new(x, -1.0, 0.5), Vec3::new(x + 0.3, -1.0, 0.5), Vec3::new(x, 1.0, 0.5)]);
     }
     // Zero-area triangles (a line and a point) and many triangles collapsed to one point.
     soup.positions.extend([Vec3::ZERO, Vec3::X, Vec3::X * 2.0]);
@@ -78,39 +54,23 @@ fn adversarial_scene(seed: u64) -> Scene {
     for _ in 0..20 {
         soup.positions.extend([Vec3::splat(-1.5); 3]);
     }
-    soup.indices = (0..soup.positions.len() as u32 / 3)
-        .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
-        .collect();
+    soup.indices = (0..soup.positions.len() as u32 / 3).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
     let cube = Mesh::cuboid(Vec3::splat(-0.5), Vec3::splat(0.5));
-    let huge = Mesh::quad(
-        Vec3::new(-1e6, -1e6, -20.0),
-        Vec3::new(2e6, 0.0, 0.0),
-        Vec3::new(0.0, 2e6, 0.0),
-    );
+    let huge = Mesh::quad(Vec3::new(-1e6, -1e6, -20.0), Vec3::new(2e6, 0.0, 0.0), Vec3::new(0.0, 2e6, 0.0));
     let geometries = vec![
         Geometry::Mesh(soup),
         Geometry::Mesh(cube),
-        Geometry::Sphere(Sphere {
-            center: Vec3::ZERO,
-            radius: 0.7,
-        }),
+        Geometry::Sphere(Sphere { center: Vec3::ZERO, radius: 0.7 }),
         Geometry::Mesh(huge),
     ];
     let mut objects = vec![object(0, None), object(3, None)];
     for i in 0..12 {
         let m = Affine3A::from_scale_rotation_translation(
-            Vec3::new(
-                0.5 + rng.next_f32(),
-                0.5 + rng.next_f32(),
-                0.5 + rng.next_f32(),
-            ),
+            Vec3::new(0.5 + rng.next_f32(), 0.5 + rng.next_f32(), 0.5 + rng.next_f32()),
             Quat::from_axis_angle(rand_vec(&mut rng, 1.0).normalize(), rng.next_f32() * 6.0),
             rand_vec(&mut rng, 5.0),
         );
-        objects.push(object(
-            if i % 3 == 0 { 2 } else { 1 },
-            Transform::try_new(m),
-        ));
+        objects.push(object(if i % 3 == 0 { 2 } else { 1 }, Transform::try_new(m)));
     }
     objects.push(object(2, None));
     scene_of(geometries, objects)
@@ -155,50 +115,22 @@ fn check_against_brute<A: Accel>(name: &str, scene: &Scene, params: &A::Params, 
             (Some(a), Some(b)) => {
                 hits += 1;
                 let tol = 1e-5 * a.t.max(1.0);
-                assert!(
-                    (a.t - b.t).abs() <= tol,
-                    "{name} ray {i}: t {} vs brute {}",
-                    b.t,
-                    a.t
-                );
+                assert!((a.t - b.t).abs() <= tol, "{name} ray {i}: t {} vs brute {}", b.t, a.t);
                 // Same object unless two surfaces are hit at the same distance (a tie).
                 if a.object != b.object {
-                    assert!(
-                        (a.t - b.t).abs() <= tol,
-                        "{name} ray {i}: object {} vs brute {}",
-                        b.object,
-                        a.object
-                    );
+                    assert!((a.t - b.t).abs() <= tol, "{name} ray {i}: object {} vs brute {}", b.object, a.object);
                 }
                 // Any hit agrees with closest hit. The margin covers the triangle test's own
                 // error, which grows with the coordinates (the ±1e6 quad reports t to ~1e-3).
                 let margin = a.t * 1e-3 + 1e-6 * scene_scale(scene);
-                assert!(
-                    world.occluded(r, a.t + margin),
-                    "{name} ray {i}: occluded misses the closest hit"
-                );
-                assert!(
-                    !world.occluded(r, a.t * 0.999),
-                    "{name} ray {i}: occluded before the closest hit"
-                );
+                assert!(world.occluded(r, a.t + margin), "{name} ray {i}: occluded misses the closest hit");
+                assert!(!world.occluded(r, a.t * 0.999), "{name} ray {i}: occluded before the closest hit");
             }
-            (a, b) => panic!(
-                "{name} ray {i} {r:?}: brute {:?} vs {:?}",
-                a.map(|h| h.t),
-                b.map(|h| h.t)
-            ),
+            (a, b) => panic!("{name} ray {i} {r:?}: brute {:?} vs {:?}", a.map(|h| h.t), b.map(|h| h.t)),
         }
-        assert_eq!(
-            world.occluded(r, f32::INFINITY),
-            a.is_some(),
-            "{name} ray {i}: occluded(inf)"
-        );
+        assert_eq!(world.occluded(r, f32::INFINITY), a.is_some(), "{name} ray {i}: occluded(inf)");
     }
-    assert!(
-        hits > rays.len() / 3,
-        "{name}: only {hits} of {} rays hit; the test is too easy",
-        rays.len()
-    );
+    assert!(hits > rays.len() / 3, "{name}: only {hits} of {} rays hit; the test is too easy", rays.len());
 }
 
 #[test]
@@ -208,29 +140,13 @@ fn every_bvh_matches_brute_force_on_an_adversarial_scene() {
         let rays = rays(&scene, 3000, seed);
         for split in [SplitMethod::Center, SplitMethod::Median, SplitMethod::Sah] {
             for max_leaf_prims in [1, 4] {
-                let params = BvhParams {
-                    split,
-                    base: AccelParams {
-                        max_leaf_prims,
-                        ..AccelParams::default()
-                    },
-                };
-                check_against_brute::<Bvh>(
-                    &format!("{split:?}/{max_leaf_prims}"),
-                    &scene,
-                    &params,
-                    &rays,
-                );
+                let params = BvhParams { split, base: AccelParams { max_leaf_prims, ..AccelParams::default() } };
+                check_against_brute::<Bvh>(&format!("{split:?}/{max_leaf_prims}"), &scene, &params, &rays);
             }
         }
         // A depth limit that forces big leaves.
-        let params = BvhParams {
-            split: SplitMethod::Sah,
-            base: AccelParams {
-                max_depth: 3,
-                ..AccelParams::default()
-            },
-        };
+        let params =
+            BvhParams { split: SplitMethod::Sah, base: AccelParams { max_depth: 3, ..AccelParams::default() } };
         check_against_brute::<Bvh>("sah/depth3", &scene, &params, &rays);
     }
 }
@@ -246,12 +162,8 @@ fn empty_and_single_primitive_scenes() {
             assert!(!w.occluded(&r, f32::INFINITY));
         });
     }
-    let one = Mesh {
-        positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
-        normals: None,
-        uvs: None,
-        indices: vec![[0, 1, 2]],
-    };
+    let one =
+        Mesh { positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y], normals: None, uvs: None, indices: vec![[0, 1, 2]] };
     let scene = scene_of(vec![Geometry::Mesh(one)], vec![object(0, None)]);
     let r = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z);
     for kind in AccelKind::ALL {
@@ -265,19 +177,15 @@ fn empty_and_single_primitive_scenes() {
 #[test]
 fn bvh_statistics_are_sane() {
     let scene = adversarial_scene(3);
-    let params = BvhParams {
-        split: SplitMethod::Sah,
-        base: AccelParams::default(),
-    };
+    let params = BvhParams { split: SplitMethod::Sah, base: AccelParams::default() };
     let world: World<Bvh> = World::build(&scene, &params);
     let (_, blas) = world.structures();
     let soup = blas[0].as_ref().unwrap().stats();
-    let Geometry::Mesh(m) = &scene.geometries[0] else {
-        unreachable!()
-    };
+    let Geometry::Mesh(m) = &scene.geometries[0] else { unreachable!() };
     // Every non-degenerate-box triangle is referenced exactly once (a BVH never duplicates).
     assert_eq!(soup.prim_refs, m.indices.len());
-    assert_eq!(soup.nodes, 2 * soup.leaves - 1);
+    // 4-wide nodes: at least (leaves - 1) / 3 of them, at most leaves - 1.
+    assert!(soup.nodes >= (soup.leaves - 1) / 3 && soup.nodes < soup.leaves, "{soup:?}");
     assert!(soup.max_depth <= 24);
     assert!(soup.sah_cost > 1.0 && soup.sah_cost < m.indices.len() as f32);
 }
@@ -341,16 +249,8 @@ pub fn icosphere(subdiv: u32) -> Mesh {
             .collect();
     }
     // Non-round coordinates make the edge and vertex cases hard.
-    let p = p
-        .iter()
-        .map(|v| *v * 1.37 + Vec3::new(0.1, -0.3, 0.7))
-        .collect();
-    Mesh {
-        positions: p,
-        normals: None,
-        uvs: None,
-        indices: f,
-    }
+    let p = p.iter().map(|v| *v * 1.37 + Vec3::new(0.1, -0.3, 0.7)).collect();
+    Mesh { positions: p, normals: None, uvs: None, indices: f }
 }
 
 /// Rays that cross the surface exactly at every vertex and every edge midpoint of `mesh` must
@@ -360,10 +260,7 @@ pub fn icosphere(subdiv: u32) -> Mesh {
 /// Also rays from an interior point `inside` (if given) must hit the closed surface.
 pub fn assert_watertight(mesh: &Mesh, inside: Option<Vec3>) -> usize {
     let scene = scene_of(vec![Geometry::Mesh(mesh.clone())], vec![object(0, None)]);
-    let params = BvhParams {
-        split: SplitMethod::Sah,
-        base: AccelParams::default(),
-    };
+    let params = BvhParams { split: SplitMethod::Sah, base: AccelParams::default() };
     let world: World<Bvh> = World::build(&scene, &params);
     let dist = mesh.aabb().extent().length() * 2.0;
     let face_n: Vec<Vec3> = (0..mesh.indices.len())
@@ -383,10 +280,7 @@ pub fn assert_watertight(mesh: &Mesh, inside: Option<Vec3>) -> usize {
     }
     let mut targets: Vec<(Vec3, Vec3)> = mesh.positions.iter().copied().zip(vertex_n).collect();
     for ((a, b), n) in edges {
-        targets.push((
-            (mesh.positions[a as usize] + mesh.positions[b as usize]) * 0.5,
-            n,
-        ));
+        targets.push(((mesh.positions[a as usize] + mesh.positions[b as usize]) * 0.5, n));
     }
     let mut tested = 0;
     for (i, &(q, n)) in targets.iter().enumerate() {
@@ -394,24 +288,12 @@ pub fn assert_watertight(mesh: &Mesh, inside: Option<Vec3>) -> usize {
         let o = q + n * dist;
         let r = Ray::new(o, q - o);
         let hit = world.intersect(&r, f32::INFINITY);
-        assert!(
-            hit.is_some_and(|h| h.t <= 1.0 + 1e-4),
-            "ray {i} slipped through the surface at {q}"
-        );
-        assert!(
-            world.occluded(&r, 1.0 + 1e-4),
-            "any-hit ray {i} slipped through the surface at {q}"
-        );
+        assert!(hit.is_some_and(|h| h.t <= 1.0 + 1e-4), "ray {i} slipped through the surface at {q}");
+        assert!(world.occluded(&r, 1.0 + 1e-4), "any-hit ray {i} slipped through the surface at {q}");
         if let Some(c) = inside {
             let r = Ray::new(c, q - c);
-            assert!(
-                world.intersect(&r, 2.0).is_some(),
-                "ray {i} from inside escaped through {q}"
-            );
-            assert!(
-                world.occluded(&r, 2.0),
-                "any-hit ray {i} from inside escaped through {q}"
-            );
+            assert!(world.intersect(&r, 2.0).is_some(), "ray {i} from inside escaped through {q}");
+            assert!(world.occluded(&r, 2.0), "any-hit ray {i} from inside escaped through {q}");
         }
         tested += 1;
     }
@@ -421,10 +303,7 @@ pub fn assert_watertight(mesh: &Mesh, inside: Option<Vec3>) -> usize {
 #[test]
 fn watertight_closed_mesh_never_lets_rays_slip_through() {
     let m = icosphere(3);
-    let n = assert_watertight(
-        &m,
-        Some(Vec3::new(0.1, -0.3, 0.7) + Vec3::new(0.013, 0.021, -0.017)),
-    );
+    let n = assert_watertight(&m, Some(Vec3::new(0.1, -0.3, 0.7) + Vec3::new(0.013, 0.021, -0.017)));
     assert!(n > 2000);
 }
 
@@ -437,30 +316,20 @@ fn instance_boxes_contain_every_transformed_vertex() {
         match &scene.geometries[o.geometry] {
             Geometry::Mesh(m) => {
                 for p in &m.positions {
-                    assert!(
-                        b.contains(t.point(*p)),
-                        "vertex {p} escapes its instance box"
-                    );
+                    assert!(b.contains(t.point(*p)), "vertex {p} escapes its instance box");
                 }
             }
             Geometry::Sphere(s) => {
                 for i in 0..200 {
                     let th = i as f32 * 0.1;
-                    let d = Vec3::new(
-                        th.cos() * (i as f32 * 0.37).sin(),
-                        th.sin(),
-                        (i as f32 * 0.61).cos(),
-                    )
-                    .normalize();
+                    let d =
+                        Vec3::new(th.cos() * (i as f32 * 0.37).sin(), th.sin(), (i as f32 * 0.61).cos()).normalize();
                     assert!(b.contains(t.point(s.center + d * s.radius)));
                 }
             }
         }
         // The box of the 8 transformed corners, no larger.
         let g = scene.geometries[o.geometry].aabb();
-        assert_eq!(
-            b,
-            snell_core::geometry::Aabb::from_points(g.corners().map(|c| t.point(c)))
-        );
+        assert_eq!(b, snell_core::geometry::Aabb::from_points(g.corners().map(|c| t.point(c))));
     }
 }

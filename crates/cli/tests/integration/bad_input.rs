@@ -12,35 +12,22 @@ fn fails(files: &[(&str, &[u8])], target: &str, extra: &[&str], expect: &[&str])
     for (name, content) in files {
         std::fs::write(dir.path().join(name), content).unwrap();
     }
-    let mut args = vec![
-        "render", target, "-o", "out.png", "--width", "8", "--height", "8", "--spp", "1",
-    ];
+    let mut args = vec!["render", target, "-o", "out.png", "--width", "8", "--height", "8", "--spp", "1"];
     args.extend_from_slice(extra);
     let o = run(&args, dir.path());
     let err = stderr(&o);
-    assert_eq!(
-        o.status.code(),
-        Some(1),
-        "expected exit 1, got {:?}; stderr:\n{err}",
-        o.status
-    );
+    assert_eq!(o.status.code(), Some(1), "expected exit 1, got {:?}; stderr:\n{err}", o.status);
     assert!(!err.contains("panicked"), "panic:\n{err}");
     for e in expect {
         assert!(err.contains(e), "stderr should mention {e:?}:\n{err}");
     }
-    assert!(
-        !dir.path().join("out.png").exists(),
-        "an output file was written"
-    );
+    assert!(!dir.path().join("out.png").exists(), "an output file was written");
     let leftovers: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
         .collect();
-    assert!(
-        leftovers.is_empty(),
-        "temporary files left behind: {leftovers:?}"
-    );
+    assert!(leftovers.is_empty(), "temporary files left behind: {leftovers:?}");
     err
 }
 
@@ -55,24 +42,14 @@ fn missing_scene_file() {
 fn missing_mesh_file() {
     fails(&[], "nowhere.ply", &[], &["nowhere.ply", "no such file"]);
     let scene = b"[[shapes]]\ntype = \"mesh\"\nfile = \"gone.obj\"\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:8", "gone.obj", "no such file"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:8", "gone.obj", "no such file"]);
 }
 
 #[test]
 fn toml_syntax_error_names_line_and_column() {
     // An unclosed array is reported where the parser gives up: the end of the file.
     let scene = b"[camera]\neye = [0, 0, 5\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:1", "expected `]`"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:1", "expected `]`"]);
     let scene = b"[render]\nwidth = = 3\n";
     fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:2:9"]);
 }
@@ -80,93 +57,40 @@ fn toml_syntax_error_names_line_and_column() {
 #[test]
 fn unknown_key_names_line_and_column() {
     let scene = format!("{GOOD_HEAD}radius = 1\ncolour = [1, 0, 0]\n");
-    fails(
-        &[("s.toml", scene.as_bytes())],
-        "s.toml",
-        &[],
-        &["s.toml:7:1", "unknown field `colour`"],
-    );
+    fails(&[("s.toml", scene.as_bytes())], "s.toml", &[], &["s.toml:7:1", "unknown field `colour`"]);
     // A key that exists, but not for this type.
     let scene = b"[materials.m]\ntype = \"diffuse\"\nior = 1.5\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:7", "'ior' does not apply to a 'diffuse' material"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:7", "'ior' does not apply to a 'diffuse' material"]);
     let scene = b"[render]\nspp = 4\n\n[rendr]\nspp = 4\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:4:", "unknown field `rendr`"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:4:", "unknown field `rendr`"]);
 }
 
 #[test]
 fn obj_face_index_out_of_range() {
     let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n";
-    fails(
-        &[("m.obj", obj)],
-        "m.obj",
-        &[],
-        &["m.obj:5", "out of range"],
-    );
+    fails(&[("m.obj", obj)], "m.obj", &[], &["m.obj:5", "out of range"]);
     // Through a scene file too: the scene's line and the mesh's line.
     let scene = b"[[shapes]]\ntype = \"mesh\"\nfile = \"m.obj\"\n";
-    fails(
-        &[("m.obj", obj), ("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:8", "m.obj:5", "out of range"],
-    );
+    fails(&[("m.obj", obj), ("s.toml", scene)], "s.toml", &[], &["s.toml:3:8", "m.obj:5", "out of range"]);
 }
 
 #[test]
 fn nan_or_infinite_vertex() {
     let obj = b"v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n";
-    fails(
-        &[("m.obj", obj)],
-        "m.obj",
-        &[],
-        &["m.obj:2", "not a finite number"],
-    );
+    fails(&[("m.obj", obj)], "m.obj", &[], &["m.obj:2", "not a finite number"]);
     let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 -inf\nf 1 2 3\n";
-    fails(
-        &[("m.obj", obj)],
-        "m.obj",
-        &[],
-        &["m.obj:3", "not a finite number"],
-    );
+    fails(&[("m.obj", obj)], "m.obj", &[], &["m.obj:3", "not a finite number"]);
     let mut ply = ply_header("binary_little_endian", 3, 1);
     for v in [[0.0f32, 0.0, 0.0], [f32::NAN, 0.0, 0.0], [0.0, 1.0, 0.0]] {
-        v.iter()
-            .for_each(|c| ply.extend_from_slice(&c.to_le_bytes()));
+        v.iter().for_each(|c| ply.extend_from_slice(&c.to_le_bytes()));
     }
     ply.push(3);
-    [0i32, 1, 2]
-        .iter()
-        .for_each(|i| ply.extend_from_slice(&i.to_le_bytes()));
-    fails(
-        &[("m.ply", &ply)],
-        "m.ply",
-        &[],
-        &["m.ply", "byte", "vertex 1 has a NaN or infinite coordinate"],
-    );
+    [0i32, 1, 2].iter().for_each(|i| ply.extend_from_slice(&i.to_le_bytes()));
+    fails(&[("m.ply", &ply)], "m.ply", &[], &["m.ply", "byte", "vertex 1 has a NaN or infinite coordinate"]);
     let ascii = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 inf\n0 1 0\n3 0 1 2\n";
-    fails(
-        &[("m.ply", ascii)],
-        "m.ply",
-        &[],
-        &["m.ply:11", "NaN or infinite"],
-    );
+    fails(&[("m.ply", ascii)], "m.ply", &[], &["m.ply:11", "NaN or infinite"]);
     let scene = format!("{GOOD_HEAD}center = [0, nan, 0]\n");
-    fails(
-        &[("s.toml", scene.as_bytes())],
-        "s.toml",
-        &[],
-        &["s.toml:6:10", "finite"],
-    );
+    fails(&[("s.toml", scene.as_bytes())], "s.toml", &[], &["s.toml:6:10", "finite"]);
 }
 
 fn ply_header(format: &str, vertices: u64, faces: u64) -> Vec<u8> {
@@ -179,13 +103,10 @@ fn ply_header(format: &str, vertices: u64, faces: u64) -> Vec<u8> {
 fn good_binary_ply() -> Vec<u8> {
     let mut ply = ply_header("binary_little_endian", 3, 1);
     for v in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
-        v.iter()
-            .for_each(|c| ply.extend_from_slice(&c.to_le_bytes()));
+        v.iter().for_each(|c| ply.extend_from_slice(&c.to_le_bytes()));
     }
     ply.push(3);
-    [0i32, 1, 2]
-        .iter()
-        .for_each(|i| ply.extend_from_slice(&i.to_le_bytes()));
+    [0i32, 1, 2].iter().for_each(|i| ply.extend_from_slice(&i.to_le_bytes()));
     ply
 }
 
@@ -194,16 +115,8 @@ fn truncated_binary_ply() {
     let ply = good_binary_ply();
     // Cut inside the face list: the header's sizes still fit, the data does not.
     let cut = &ply[..ply.len() - 2];
-    let err = fails(
-        &[("m.ply", cut)],
-        "m.ply",
-        &[],
-        &["m.ply", "at byte", "truncated"],
-    );
-    assert!(
-        err.contains(&format!("byte {}", ply.len() - 9)) || err.contains("byte"),
-        "{err}"
-    );
+    let err = fails(&[("m.ply", cut)], "m.ply", &[], &["m.ply", "at byte", "truncated"]);
+    assert!(err.contains(&format!("byte {}", ply.len() - 9)) || err.contains("byte"), "{err}");
     // Cut inside the vertices: caught by the size check before reading.
     let cut = &ply[..ply.len() - 20];
     fails(&[("m.ply", cut)], "m.ply", &[], &["m.ply", "bytes"]);
@@ -213,102 +126,48 @@ fn truncated_binary_ply() {
 fn ply_declaring_a_trillion_vertices_fails_fast() {
     let mut ply = ply_header("binary_little_endian", 1_000_000_000_000, 1);
     ply.extend_from_slice(&good_binary_ply()[ply_header("binary_little_endian", 3, 1).len()..]);
-    fails(
-        &[("m.ply", &ply)],
-        "m.ply",
-        &[],
-        &["m.ply", "1000000000000", "bytes"],
-    );
+    fails(&[("m.ply", &ply)], "m.ply", &[], &["m.ply", "1000000000000", "bytes"]);
     let mut ply = ply_header("ascii", 1_000_000_000_000, 1);
     ply.extend_from_slice(b"0 0 0\n");
-    fails(
-        &[("m.ply", &ply)],
-        "m.ply",
-        &[],
-        &["m.ply", "1000000000000"],
-    );
+    fails(&[("m.ply", &ply)], "m.ply", &[], &["m.ply", "1000000000000"]);
 }
 
 #[test]
 fn empty_files() {
     fails(&[("s.toml", b"")], "s.toml", &[], &["s.toml", "empty"]);
-    fails(
-        &[("s.toml", b"# only a comment\n\n")],
-        "s.toml",
-        &[],
-        &["s.toml", "empty"],
-    );
+    fails(&[("s.toml", b"# only a comment\n\n")], "s.toml", &[], &["s.toml", "empty"]);
     fails(&[("m.obj", b"")], "m.obj", &[], &["m.obj", "empty"]);
     fails(&[("m.ply", b"")], "m.ply", &[], &["m.ply", "empty"]);
-    fails(
-        &[("m.obj", b"v 0 0 0\n")],
-        "m.obj",
-        &[],
-        &["m.obj", "no faces"],
-    );
+    fails(&[("m.obj", b"v 0 0 0\n")], "m.obj", &[], &["m.obj", "no faces"]);
 }
 
 #[test]
 fn negative_or_nan_ior() {
     for (ior, col) in [("-1.5", 7), ("nan", 7), ("0", 7), ("-inf", 7)] {
         let scene = format!("[materials.g]\ntype = \"dielectric\"\nior = {ior}\n");
-        fails(
-            &[("s.toml", scene.as_bytes())],
-            "s.toml",
-            &[],
-            &["s.toml:3:", "index of refraction"],
-        );
+        fails(&[("s.toml", scene.as_bytes())], "s.toml", &[], &["s.toml:3:", "index of refraction"]);
         let _ = col;
     }
     let scene = b"[materials.g]\ntype = \"dielectric\"\nior = \"unobtainium\"\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:7", "unknown IOR preset 'unobtainium'"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:7", "unknown IOR preset 'unobtainium'"]);
     let scene = b"[materials.g]\ntype = \"glazed\"\nior = 0.5\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:7", "below 1"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:7", "below 1"]);
 }
 
 #[test]
 fn zero_sized_image() {
     let scene = format!("[render]\nwidth = 0\n\n{GOOD_HEAD}");
-    fails(
-        &[("s.toml", scene.as_bytes())],
-        "s.toml",
-        &[],
-        &["s.toml:2:9", "'width' must be between 1"],
-    );
+    fails(&[("s.toml", scene.as_bytes())], "s.toml", &[], &["s.toml:2:9", "'width' must be between 1"]);
     let scene = format!("[render]\nheight = 0\n\n{GOOD_HEAD}");
-    fails(
-        &[("s.toml", scene.as_bytes())],
-        "s.toml",
-        &[],
-        &["s.toml:2:10", "'height'"],
-    );
+    fails(&[("s.toml", scene.as_bytes())], "s.toml", &[], &["s.toml:2:10", "'height'"]);
 }
 
 #[test]
 fn image_too_large_to_allocate() {
     let dir = tempfile::tempdir().unwrap();
-    let o = run(
-        &[
-            "render", "--width", "65536", "--height", "65536", "-o", "out.png",
-        ],
-        dir.path(),
-    );
+    let o = run(&["render", "--width", "65536", "--height", "65536", "-o", "out.png"], dir.path());
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
-    assert!(
-        stderr(&o).contains("65536x65536") && stderr(&o).contains("at most"),
-        "{}",
-        stderr(&o)
-    );
+    assert!(stderr(&o).contains("65536x65536") && stderr(&o).contains("at most"), "{}", stderr(&o));
     assert!(!dir.path().join("out.png").exists());
 }
 
@@ -325,60 +184,20 @@ fn zero_size_on_the_command_line_is_misuse() {
 #[test]
 fn other_bad_values() {
     let scene = b"[[shapes]]\ntype = \"sphere\"\nmaterial = \"nope\"\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:12", "no material named 'nope'"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:12", "no material named 'nope'"]);
     let scene = b"[[shapes]]\ntype = \"sphere\"\nradius = -1\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:10", "'radius'"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:10", "'radius'"]);
     let scene = b"[[shapes]]\ntype = \"sphere\"\ntransform = [{ scale = 0 }]\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:3:", "singular"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:", "singular"]);
     let scene = b"[[shapes]]\ntype = \"torus\"\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:2:8", "unknown shape type 'torus'"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:2:8", "unknown shape type 'torus'"]);
     let scene = b"[camera]\neye = [0, 0, 0]\nlook_at = [0, 0, 0]\n[[shapes]]\ntype = \"sphere\"\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:1:", "coincide"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:1:", "coincide"]);
     let scene = b"[render]\naccel = \"octree\"\n";
-    fails(
-        &[("s.toml", scene)],
-        "s.toml",
-        &[],
-        &["s.toml:2:9", "unknown accelerator 'octree'"],
-    );
-    fails(
-        &[("s.txt", b"hello")],
-        "s.txt",
-        &[],
-        &["s.txt", "unsupported scene format"],
-    );
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:2:9", "unknown accelerator 'octree'"]);
+    fails(&[("s.txt", b"hello")], "s.txt", &[], &["s.txt", "unsupported scene format"]);
     let invalid_utf8: &[u8] = b"[render]\nspp = 1 # \xff\xfe\n";
-    fails(
-        &[("s.toml", invalid_utf8)],
-        "s.toml",
-        &[],
-        &["s.toml", "UTF-8"],
-    );
+    fails(&[("s.toml", invalid_utf8)], "s.toml", &[], &["s.toml", "UTF-8"]);
 }
 
 #[test]

@@ -3,11 +3,7 @@
 use crate::common::{data, run, shared_scene, stderr};
 
 fn field<'a>(line: &'a str, key: &str) -> &'a str {
-    let start = line
-        .find(&format!("\"{key}\":"))
-        .unwrap_or_else(|| panic!("no {key} in {line}"))
-        + key.len()
-        + 3;
+    let start = line.find(&format!("\"{key}\":")).unwrap_or_else(|| panic!("no {key} in {line}")) + key.len() + 3;
     let rest = &line[start..];
     rest[..rest.find([',', '}']).unwrap()].trim_matches('"')
 }
@@ -37,11 +33,7 @@ fn json_lines_for_every_accelerator_and_workload() {
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<&str> = out.lines().collect();
-    assert_eq!(
-        lines.len(),
-        3 * snell_core::accel::AccelKind::ALL.len(),
-        "{out}"
-    );
+    assert_eq!(lines.len(), 3 * snell_core::accel::AccelKind::ALL.len(), "{out}");
     for l in &lines {
         for key in [
             "mesh",
@@ -66,22 +58,13 @@ fn json_lines_for_every_accelerator_and_workload() {
     }
     // Every accelerator finds the same hits (brute traces all rays here: fewer than 2048 hit).
     for workload in ["primary", "bounce", "bounce-occluded"] {
-        let hits: Vec<&str> = lines
-            .iter()
-            .filter(|l| field(l, "workload") == workload)
-            .map(|l| field(l, "hits"))
-            .collect();
-        assert!(
-            hits.windows(2).all(|w| w[0] == w[1]),
-            "{workload}: {hits:?}"
-        );
+        let hits: Vec<&str> =
+            lines.iter().filter(|l| field(l, "workload") == workload).map(|l| field(l, "hits")).collect();
+        assert!(hits.windows(2).all(|w| w[0] == w[1]), "{workload}: {hits:?}");
     }
     let primary_hits: usize = field(lines[0], "hits").parse().unwrap();
     let bounce_hits: usize = field(lines[1], "hits").parse().unwrap();
-    assert!(
-        primary_hits > 100 && bounce_hits > 5,
-        "{primary_hits} {bounce_hits}"
-    );
+    assert!(primary_hits > 100 && bounce_hits > 5, "{primary_hits} {bounce_hits}");
 }
 
 #[test]
@@ -90,26 +73,13 @@ fn replayed_ray_files_are_checked() {
     let mesh = data("tetra.obj");
     std::fs::write(dir.path().join("r_primary.f32"), [0u8; 25]).unwrap();
     std::fs::write(dir.path().join("r_bounce.f32"), [0u8; 24]).unwrap();
-    let o = run(
-        &["bench", mesh.to_str().unwrap(), "--rays", "r"],
-        dir.path(),
-    );
+    let o = run(&["bench", mesh.to_str().unwrap(), "--rays", "r"], dir.path());
     assert_eq!(o.status.code(), Some(1));
-    assert!(
-        stderr(&o).contains("r_primary.f32") && stderr(&o).contains("24 bytes"),
-        "{}",
-        stderr(&o)
-    );
-    let o = run(
-        &["bench", mesh.to_str().unwrap(), "--rays", "missing"],
-        dir.path(),
-    );
+    assert!(stderr(&o).contains("r_primary.f32") && stderr(&o).contains("24 bytes"), "{}", stderr(&o));
+    let o = run(&["bench", mesh.to_str().unwrap(), "--rays", "missing"], dir.path());
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("missing_primary.f32"), "{}", stderr(&o));
-    let o = run(
-        &["bench", mesh.to_str().unwrap(), "--accel", "octree"],
-        dir.path(),
-    );
+    let o = run(&["bench", mesh.to_str().unwrap(), "--accel", "octree"], dir.path());
     assert_eq!(o.status.code(), Some(1));
 }
 
@@ -119,39 +89,16 @@ fn bunny_primary_hits_match_embree() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let o = run(
-        &[
-            "bench",
-            p.to_str().unwrap(),
-            "--json",
-            "--reps",
-            "1",
-            "--accel",
-            "bvh-sah",
-        ],
-        dir.path(),
-    );
+    let o = run(&["bench", p.to_str().unwrap(), "--json", "--reps", "1", "--accel", "bvh-sah"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    let primary = out
-        .lines()
-        .find(|l| field(l, "workload") == "primary")
-        .unwrap();
+    let primary = out.lines().find(|l| field(l, "workload") == "primary").unwrap();
     // ../shared/bench/README.md: Embree hits 448,052 of the 1,048,576 primary rays.
     let hits: i64 = field(primary, "hits").parse().unwrap();
-    assert!(
-        (hits - 448_052).abs() <= 45,
-        "{hits} primary hits; Embree has 448052 (0.01 % = 45)"
-    );
-    let bounce = out
-        .lines()
-        .find(|l| field(l, "workload") == "bounce")
-        .unwrap();
+    assert!((hits - 448_052).abs() <= 45, "{hits} primary hits; Embree has 448052 (0.01 % = 45)");
+    let bounce = out.lines().find(|l| field(l, "workload") == "bounce").unwrap();
     let hits: i64 = field(bounce, "hits").parse().unwrap();
     // The bounce rays are regenerated from our own hit points (not replayed), so they differ from
     // Embree's in the last bits; the hit count still agrees closely with Embree's 38,984.
-    assert!(
-        (hits - 38_984).abs() <= 40,
-        "{hits} bounce hits; Embree has 38984"
-    );
+    assert!((hits - 38_984).abs() <= 40, "{hits} bounce hits; Embree has 38984");
 }

@@ -6,11 +6,7 @@ pub fn snell() -> Command {
 }
 
 pub fn run(args: &[&str], dir: &Path) -> Output {
-    snell()
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("failed to start snell")
+    snell().args(args).current_dir(dir).output().expect("failed to start snell")
 }
 
 pub fn stderr(o: &Output) -> String {
@@ -25,24 +21,16 @@ pub fn shared_scene(rel: &str) -> Option<PathBuf> {
         return None;
     };
     let p = Path::new(&root).join(rel);
-    assert!(
-        p.is_file(),
-        "SNELL_SCENES={root} is set but {} is missing",
-        p.display()
-    );
+    assert!(p.is_file(), "SNELL_SCENES={root} is set but {} is missing", p.display());
     Some(p)
 }
 
 /// Path of a file in `crates/cli/tests/data`.
 pub fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
 }
 
 /// Path of a scene in the repository's `scenes/` directory.
 pub fn repo_scene(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenes")
-        .join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name)
 }

@@ -23,23 +23,13 @@ pub struct Opts {
 
 impl Default for Opts {
     fn default() -> Self {
-        Opts {
-            width: 32,
-            height: 32,
-            spp: 4,
-            threads: 0,
-            max_depth: None,
-            min_attenuation: None,
-        }
+        Opts { width: 32, height: 32, spp: 4, threads: 0, max_depth: None, min_attenuation: None }
     }
 }
 
 pub fn render_loaded(l: &LoadedScene, o: &Opts) -> (Image, RayStats) {
     let mut scene = l.scene.clone();
-    if let Some(c) = l
-        .frame
-        .and_then(|b| snell_io::scene::auto_camera(b, o.width, o.height))
-    {
+    if let Some(c) = l.frame.and_then(|b| snell_io::scene::auto_camera(b, o.width, o.height)) {
         scene.camera = c;
     }
     let settings = RenderSettings {
@@ -54,10 +44,7 @@ pub fn render_loaded(l: &LoadedScene, o: &Opts) -> (Image, RayStats) {
         max_depth: o.max_depth.unwrap_or(l.settings.max_depth),
         min_attenuation: o.min_attenuation.unwrap_or(l.settings.min_attenuation),
     };
-    let world = l
-        .settings
-        .accel
-        .build_world(&scene, &AccelParams::default());
+    let world = l.settings.accel.build_world(&scene, &AccelParams::default());
     with_world!(&world, w => render(w, &integrator, &settings, &|_| {}))
 }
 
@@ -69,22 +56,11 @@ fn render_src(src: &str, o: &Opts) -> (Image, RayStats) {
 #[test]
 fn image_is_bit_identical_with_one_and_two_threads() {
     let l = snell_io::scene::load(&repo_scene("default.toml")).unwrap();
-    let o1 = Opts {
-        width: 40,
-        height: 30,
-        spp: 4,
-        threads: 1,
-        ..Opts::default()
-    };
+    let o1 = Opts { width: 40, height: 30, spp: 4, threads: 1, ..Opts::default() };
     let o2 = Opts { threads: 2, ..o1 };
     let (a, sa) = render_loaded(&l, &o1);
     let (b, sb) = render_loaded(&l, &o2);
-    let bits = |i: &Image| {
-        i.pixels
-            .iter()
-            .flat_map(|p| p.to_array().map(f32::to_bits))
-            .collect::<Vec<_>>()
-    };
+    let bits = |i: &Image| i.pixels.iter().flat_map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
     assert_eq!(bits(&a), bits(&b));
     assert_eq!(sa, sb);
     // And the seed does change it.
@@ -98,29 +74,15 @@ fn image_is_bit_identical_with_one_and_two_threads() {
 fn cli_output_is_identical_across_thread_counts() {
     let dir = tempfile::tempdir().unwrap();
     let common = ["render", "--width", "24", "--height", "16", "--spp", "2"];
-    let a = run(
-        &[&common[..], &["-o", "a.exr", "--threads", "1"]].concat(),
-        dir.path(),
-    );
-    let b = run(
-        &[&common[..], &["-o", "b.exr", "--threads", "2"]].concat(),
-        dir.path(),
-    );
-    assert!(
-        a.status.success() && b.status.success(),
-        "{}{}",
-        stderr(&a),
-        stderr(&b)
-    );
+    let a = run(&[&common[..], &["-o", "a.exr", "--threads", "1"]].concat(), dir.path());
+    let b = run(&[&common[..], &["-o", "b.exr", "--threads", "2"]].concat(), dir.path());
+    assert!(a.status.success() && b.status.success(), "{}{}", stderr(&a), stderr(&b));
     let ra = image::open(dir.path().join("a.exr")).unwrap().to_rgb32f();
     let rb = image::open(dir.path().join("b.exr")).unwrap().to_rgb32f();
     assert_eq!(ra.as_raw(), rb.as_raw());
     // The summary line reports time and throughput.
     let out = String::from_utf8_lossy(&a.stdout);
-    assert!(
-        out.contains("Mrays/s") && out.contains("camera rays"),
-        "{out}"
-    );
+    assert!(out.contains("Mrays/s") && out.contains("camera rays"), "{out}");
 }
 
 const PLANE: &str = r#"
@@ -152,10 +114,7 @@ fn diffuse_plane_under_directional_light_is_albedo_times_e_over_pi() {
     let (img, stats) = render_src(&src, &Opts::default());
     let expect = 0.5 * 1.0 / std::f32::consts::PI;
     for p in &img.pixels {
-        assert!(
-            (p.x - expect).abs() < 1e-5 && (p.z - expect).abs() < 1e-5,
-            "{p} vs {expect}"
-        );
+        assert!((p.x - expect).abs() < 1e-5 && (p.z - expect).abs() < 1e-5, "{p} vs {expect}");
     }
     assert_eq!(stats.shadow, stats.camera);
 }
@@ -163,14 +122,7 @@ fn diffuse_plane_under_directional_light_is_albedo_times_e_over_pi() {
 #[test]
 fn point_light_falls_off_with_inverse_square() {
     let src = format!("{PLANE}[[lights]]\ntype = \"point\"\nposition = [0, 0, 2]\nintensity = 8\n");
-    let (img, _) = render_src(
-        &src,
-        &Opts {
-            width: 33,
-            height: 33,
-            ..Opts::default()
-        },
-    );
+    let (img, _) = render_src(&src, &Opts { width: 33, height: 33, ..Opts::default() });
     // Centre pixel: L = albedo/π · I/d² · cos θ (θ ≈ 0); the pixel spans ±1/66 in x and y.
     let expect = 0.5 / std::f32::consts::PI * 8.0 / 4.0;
     let c = img.get(16, 16).x;
@@ -192,26 +144,12 @@ fn area_light_soft_shadow_is_partial() {
     )
     .replace("eye = [0, 0, 5]", "eye = [0, 0, 1]")
     .replace("scale = 0.5", "scale = 1.5");
-    let (img, _) = render_src(
-        &src,
-        &Opts {
-            width: 64,
-            height: 64,
-            spp: 1,
-            ..Opts::default()
-        },
-    );
+    let (img, _) = render_src(&src, &Opts { width: 64, height: 64, spp: 1, ..Opts::default() });
     let v: Vec<f32> = (0..64).map(|x| img.get(x, 32).x).collect();
     let max = v.iter().cloned().fold(0.0, f32::max);
     let centre = v[32];
-    let partial = v
-        .iter()
-        .filter(|&&x| x > 0.1 * max && x < 0.9 * max)
-        .count();
-    assert!(
-        centre < 0.5 * max,
-        "no shadow under the sphere: {centre} vs {max}"
-    );
+    let partial = v.iter().filter(|&&x| x > 0.1 * max && x < 0.9 * max).count();
+    assert!(centre < 0.5 * max, "no shadow under the sphere: {centre} vs {max}");
     assert!(partial >= 6, "no penumbra: {v:?}");
 }
 
@@ -250,10 +188,7 @@ fn constant_mirror_and_fresnel_conductor() {
     let (img, _) = render_src(src, &Opts::default());
     assert!(img.pixels.iter().all(|p| (p.x - 0.5).abs() < 1e-6));
     // Gold at (nearly) normal incidence reflects its R0 per channel.
-    let src = src.replace(
-        "type = \"mirror\"\nreflectance = 0.5",
-        "type = \"conductor\"\nmetal = \"gold\"",
-    );
+    let src = src.replace("type = \"mirror\"\nreflectance = 0.5", "type = \"conductor\"\nmetal = \"gold\"");
     let (img, _) = render_src(&src, &Opts::default());
     let (eta, k) = snell_core::material::metal("gold").unwrap();
     let r0 = snell_core::material::conductor_fresnel(1.0, eta, k);
@@ -266,39 +201,19 @@ fn ray_tree_is_pruned_by_depth_and_attenuation() {
     let src = std::fs::read_to_string(repo_scene("ray-tree.toml")).unwrap();
     let mut prev = 0;
     for depth in [1u32, 2, 5, 10] {
-        let o = Opts {
-            max_depth: Some(depth),
-            min_attenuation: Some(0.0),
-            spp: 1,
-            ..Opts::default()
-        };
+        let o = Opts { max_depth: Some(depth), min_attenuation: Some(0.0), spp: 1, ..Opts::default() };
         let (_, s) = render_src(&src, &o);
         let secondary = s.reflection + s.refraction;
-        assert!(
-            secondary > prev,
-            "depth {depth}: {secondary} secondary rays, not more than {prev}"
-        );
+        assert!(secondary > prev, "depth {depth}: {secondary} secondary rays, not more than {prev}");
         assert!(s.pruned_depth > 0, "depth {depth}: nothing pruned by depth");
         assert_eq!(s.pruned_attenuation, 0);
         prev = secondary;
     }
     // Depth 0: camera and shadow rays only.
-    let (_, s) = render_src(
-        &src,
-        &Opts {
-            max_depth: Some(0),
-            spp: 1,
-            ..Opts::default()
-        },
-    );
+    let (_, s) = render_src(&src, &Opts { max_depth: Some(0), spp: 1, ..Opts::default() });
     assert_eq!(s.reflection + s.refraction, 0);
     // A high attenuation limit cuts branches that depth alone would trace.
-    let o = Opts {
-        max_depth: Some(10),
-        min_attenuation: Some(0.3),
-        spp: 1,
-        ..Opts::default()
-    };
+    let o = Opts { max_depth: Some(10), min_attenuation: Some(0.3), spp: 1, ..Opts::default() };
     let (_, s) = render_src(&src, &o);
     assert!(s.pruned_attenuation > 0);
 }
@@ -308,18 +223,7 @@ fn bare_mesh_renders_with_automatic_camera() {
     let dir = tempfile::tempdir().unwrap();
     let obj = crate::common::data("tetra.obj");
     let o = run(
-        &[
-            "render",
-            obj.to_str().unwrap(),
-            "-o",
-            "m.png",
-            "--width",
-            "40",
-            "--height",
-            "30",
-            "--spp",
-            "2",
-        ],
+        &["render", obj.to_str().unwrap(), "-o", "m.png", "--width", "40", "--height", "30", "--spp", "2"],
         dir.path(),
     );
     assert!(o.status.success(), "{}", stderr(&o));
@@ -344,9 +248,8 @@ fn check_golden(name: &str, img: &Image) {
         snell_io::image_out::write_image(&path, img).unwrap();
         return;
     }
-    let gold = image::open(&path)
-        .unwrap_or_else(|e| panic!("{}: {e} (bless with SNELL_BLESS=1)", path.display()))
-        .to_rgb32f();
+    let gold =
+        image::open(&path).unwrap_or_else(|e| panic!("{}: {e} (bless with SNELL_BLESS=1)", path.display())).to_rgb32f();
     assert_eq!(gold.dimensions(), (img.width, img.height), "{name}: size");
     let mut sum = 0.0f64;
     let mut max = 0.0f32;
@@ -371,34 +274,15 @@ fn check_golden(name: &str, img: &Image) {
                 .collect(),
         };
         let _ = snell_io::image_out::write_image(&out.join("diff-x10.png"), &diff);
-        panic!(
-            "{name}: mean abs difference {mean:.2e}, max {max:.2e}; actual and diff in {}",
-            out.display()
-        );
+        panic!("{name}: mean abs difference {mean:.2e}, max {max:.2e}; actual and diff in {}", out.display());
     }
 }
 
 #[test]
 fn golden_images_of_the_example_scenes() {
-    for name in [
-        "default",
-        "ior-row",
-        "fresnel-vs-constant",
-        "total-internal-reflection",
-        "glazed",
-        "ray-tree",
-    ] {
-        let l = snell_io::scene::load(&repo_scene(&format!("{name}.toml")))
-            .unwrap_or_else(|e| panic!("{e}"));
-        let (img, _) = render_loaded(
-            &l,
-            &Opts {
-                width: 64,
-                height: 48,
-                spp: 4,
-                ..Opts::default()
-            },
-        );
+    for name in ["default", "ior-row", "fresnel-vs-constant", "total-internal-reflection", "glazed", "ray-tree"] {
+        let l = snell_io::scene::load(&repo_scene(&format!("{name}.toml"))).unwrap_or_else(|e| panic!("{e}"));
+        let (img, _) = render_loaded(&l, &Opts { width: 64, height: 48, spp: 4, ..Opts::default() });
         check_golden(name, &img);
     }
 }

@@ -11,10 +11,7 @@ use crate::common::{run, shared_scene, stderr};
 
 #[test]
 fn bunny_obj_and_ply_give_identical_geometry() {
-    let (Some(obj), Some(ply)) = (
-        shared_scene("stanford/bunny.obj"),
-        shared_scene("stanford/bunny.ply"),
-    ) else {
+    let (Some(obj), Some(ply)) = (shared_scene("stanford/bunny.obj"), shared_scene("stanford/bunny.ply")) else {
         return;
     };
     let a = snell_io::read_mesh(&obj).unwrap();
@@ -25,14 +22,8 @@ fn bunny_obj_and_ply_give_identical_geometry() {
     let close = |p: Vec3, q: Vec3| (p - q).abs().max_element() <= 1e-6;
     assert!(close(a.aabb().min, b.aabb().min) && close(a.aabb().max, b.aabb().max));
     // Triangle by triangle, the same corners (the OBJ keeps the PLY's face order).
-    let mismatches = (0..a.indices.len())
-        .filter(|&i| {
-            !a.triangle(i)
-                .iter()
-                .zip(b.triangle(i))
-                .all(|(p, q)| close(*p, q))
-        })
-        .count();
+    let mismatches =
+        (0..a.indices.len()).filter(|&i| !a.triangle(i).iter().zip(b.triangle(i)).all(|(p, q)| close(*p, q))).count();
     assert_eq!(mismatches, 0);
 }
 
@@ -42,19 +33,9 @@ fn dragon_loads_with_every_triangle() {
         return;
     };
     let m = snell_io::read_mesh(&p).unwrap();
-    assert!(
-        m.indices.len() >= 11_000 && m.indices.len() <= 11_102,
-        "{}",
-        m.indices.len()
-    );
+    assert!(m.indices.len() >= 11_000 && m.indices.len() <= 11_102, "{}", m.indices.len());
     let b = m.aabb();
-    assert!(
-        (b.min - Vec3::new(-0.1076, 0.0528, -0.0498))
-            .abs()
-            .max_element()
-            < 1e-4,
-        "{b:?}"
-    );
+    assert!((b.min - Vec3::new(-0.1076, 0.0528, -0.0498)).abs().max_element() < 1e-4, "{b:?}");
 }
 
 #[test]
@@ -66,22 +47,10 @@ fn bvh_matches_brute_force_on_the_bunny() {
     let b = mesh.aabb();
     let scene = scene_of(
         vec![Geometry::Mesh(mesh)],
-        vec![Object {
-            geometry: 0,
-            transform: None,
-            material: 0,
-            emission: Rgb::ZERO,
-            light_samples: 1,
-        }],
+        vec![Object { geometry: 0, transform: None, material: 0, emission: Rgb::ZERO, light_samples: 1 }],
     );
     let brute: World<Brute> = World::build(&scene, &AccelParams::default());
-    let bvh: World<Bvh> = World::build(
-        &scene,
-        &BvhParams {
-            split: SplitMethod::Sah,
-            base: AccelParams::default(),
-        },
-    );
+    let bvh: World<Bvh> = World::build(&scene, &BvhParams { split: SplitMethod::Sah, base: AccelParams::default() });
     // The benchmark's camera, on a coarse grid of pixels.
     let c = b.center();
     let r = b.extent().length() * 0.5;
@@ -96,12 +65,8 @@ fn bvh_matches_brute_force_on_the_bunny() {
     let mut hits = 0;
     for y in 0..16 {
         for x in 0..16 {
-            let ray: Ray = cam.ray(
-                glam::Vec2::new(x as f32 * 64.0 + 32.0, y as f32 * 64.0 + 32.0),
-                1024,
-                1024,
-                glam::Vec2::ZERO,
-            );
+            let ray: Ray =
+                cam.ray(glam::Vec2::new(x as f32 * 64.0 + 32.0, y as f32 * 64.0 + 32.0), 1024, 1024, glam::Vec2::ZERO);
             let a = brute.intersect(&ray, f32::INFINITY);
             let h = bvh.intersect(&ray, f32::INFINITY);
             assert_eq!(a.is_some(), h.is_some(), "pixel {x},{y}");
@@ -130,18 +95,7 @@ fn bunny_renders_as_a_bare_mesh() {
     };
     let dir = tempfile::tempdir().unwrap();
     let o = run(
-        &[
-            "render",
-            p.to_str().unwrap(),
-            "-o",
-            "bunny.png",
-            "--width",
-            "32",
-            "--height",
-            "32",
-            "--spp",
-            "1",
-        ],
+        &["render", p.to_str().unwrap(), "-o", "bunny.png", "--width", "32", "--height", "32", "--spp", "1"],
         dir.path(),
     );
     assert!(o.status.success(), "{}", stderr(&o));

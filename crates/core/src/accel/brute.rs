@@ -10,11 +10,7 @@ pub struct Brute {
 
 impl Brute {
     pub fn new(boxes: &[Aabb]) -> Brute {
-        Brute {
-            prims: (0..boxes.len() as u32)
-                .filter(|&i| !boxes[i as usize].is_empty())
-                .collect(),
-        }
+        Brute { prims: (0..boxes.len() as u32).filter(|&i| !boxes[i as usize].is_empty()).collect() }
     }
 }
 
@@ -25,12 +21,7 @@ impl Accel for Brute {
         Brute::new(boxes)
     }
 
-    fn closest(
-        &self,
-        _ray: &Ray,
-        t_max: &mut f32,
-        mut test: impl FnMut(u32, f32) -> Option<f32>,
-    ) -> bool {
+    fn closest(&self, _ray: &Ray, t_max: &mut f32, mut test: impl FnMut(u32, f32) -> Option<f32>) -> bool {
         let mut hit = false;
         for &p in &self.prims {
             if let Some(t) = test(p, *t_max) {

@@ -5,8 +5,10 @@
 //! sibling boxes may overlap, which is what makes a BVH a BVH rather than a k-d tree).
 //! Recursion stops at `max_leaf_prims` primitives or at depth `max_depth` (24 by default).
 //!
-//! Layout: 32-byte nodes in one array; the two children of an interior node are adjacent
-//! (`first`, `first + 1`), so traversal tests both boxes and descends into the nearer first.
+//! Build layout ≠ traversal layout (as in tinybvh): the builder makes a binary tree of 32-byte
+//! nodes, which is then collapsed into a 4-wide tree whose nodes hold the boxes of their four
+//! children in structure-of-arrays form, so that one SSE slab test checks all four. Traversal
+//! visits the children nearest first and skips stacked nodes that lie beyond the closest hit.
 
 use super::{Accel, AccelParams, AccelStats, BvhParams};
 use crate::geometry::{Aabb, Ray};
@@ -36,17 +38,31 @@ struct Node {
 impl Node {
     #[inline]
     fn aabb(&self) -> Aabb {
-        Aabb {
-            min: self.min.into(),
-            max: self.max.into(),
-        }
+        Aabb { min: self.min.into(), max: self.max.into() }
     }
 }
 
-/// A binary BVH over primitive boxes.
+/// A 4-wide node: the boxes of up to four children, structure of arrays.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Node4 {
+    /// min x, min y, min z, max x, max y, max z, each for the four children.
+    bounds: [[f32; 4]; 6],
+    /// Child references: an interior node's index, or `LEAF | index into leaves`, or `EMPTY`.
+    child: [u32; 4],
+}
+
+const LEAF: u32 = 1 << 31;
+const EMPTY: u32 = u32::MAX;
+
+/// A BVH over primitive boxes (built binary, traversed 4-wide).
 pub struct Bvh {
-    nodes: Vec<Node>,
+    nodes: Vec<Node4>,
+    /// `(first, count)` ranges of `prims`.
+    leaves: Vec<(u32, u32)>,
     prims: Vec<u32>,
+    /// Whether the root is itself a leaf (then `leaves[0]` holds everything).
+    root_leaf: bool,
     stats: AccelStats,
 }
 
@@ -67,10 +83,7 @@ struct Builder<'a> {
 impl Builder<'_> {
     fn bounds(&self, prims: &[u32]) -> (Aabb, Aabb) {
         prims.iter().fold((Aabb::EMPTY, Aabb::EMPTY), |(b, c), &p| {
-            (
-                b.union(self.boxes[p as usize]),
-                c.grow(self.centroids[p as usize]),
-            )
+            (b.union(self.boxes[p as usize]), c.grow(self.centroids[p as usize]))
         })
     }
 
@@ -92,12 +105,7 @@ impl Builder<'_> {
         }
         let mid = self.partition(prims, &bounds, &cbounds);
         let left = self.nodes.len();
-        let empty = Node {
-            min: [0.0; 3],
-            first: 0,
-            max: [0.0; 3],
-            count: 0,
-        };
+        let empty = Node { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 };
         self.nodes.push(empty);
         self.nodes.push(empty);
         self.nodes[node].first = left as u32;
@@ -125,9 +133,7 @@ impl Builder<'_> {
             SplitMethod::Sah => return self.sah_partition(prims, bounds, cbounds),
         };
         if mid == 0 || mid == n || self.split == SplitMethod::Median {
-            prims.select_nth_unstable_by(n / 2, |&a, &b| {
-                c[a as usize][axis].total_cmp(&c[b as usize][axis])
-            });
+            prims.select_nth_unstable_by(n / 2, |&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]));
             return n / 2;
         }
         mid
@@ -183,9 +189,8 @@ impl Builder<'_> {
         let lo = cbounds.min[axis];
         let scale = BINS as f32 / cbounds.extent()[axis];
         let _ = bounds;
-        let mid = partition_in_place(prims, |p| {
-            (((c[p as usize][axis] - lo) * scale) as usize).min(BINS - 1) < split_bin
-        });
+        let mid =
+            partition_in_place(prims, |p| (((c[p as usize][axis] - lo) * scale) as usize).min(BINS - 1) < split_bin);
         if mid == 0 || mid == n {
             n / 2
         } else {
@@ -206,26 +211,161 @@ fn partition_in_place(v: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
     i
 }
 
-impl Bvh {
-    fn compute_stats(&mut self, params: &AccelParams) {
-        let root_area = self.nodes.first().map_or(0.0, |n| n.aabb().half_area());
-        let mut sah = 0.0f64;
-        for n in &self.nodes {
-            let a = if root_area > 0.0 {
-                (n.aabb().half_area() / root_area) as f64
-            } else {
-                1.0
-            };
-            sah += if n.count > 0 {
-                a * params.intersect_cost as f64 * n.count as f64
-            } else {
-                a * params.traversal_cost as f64
-            };
+/// Collapses the binary tree into 4-wide nodes: each node adopts the children of its largest
+/// interior children until it has four.
+fn collapse(bin: &[Node]) -> (Vec<Node4>, Vec<(u32, u32)>, usize) {
+    let mut nodes: Vec<Node4> = Vec::with_capacity(bin.len() / 2 + 1);
+    let mut leaves: Vec<(u32, u32)> = Vec::new();
+    let mut max_depth = 0;
+    // (binary node to expand, 4-wide slot to fill, depth)
+    let mut todo = vec![(0usize, 0usize, 0usize)];
+    nodes.push(Node4 { bounds: [[0.0; 4]; 6], child: [EMPTY; 4] });
+    while let Some((b, slot, depth)) = todo.pop() {
+        max_depth = max_depth.max(depth);
+        let mut kids: Vec<usize> = vec![bin[b].first as usize, bin[b].first as usize + 1];
+        while kids.len() < 4 {
+            // Open the interior child with the largest surface area.
+            let best = kids
+                .iter()
+                .enumerate()
+                .filter(|(_, &k)| bin[k].count == 0)
+                .max_by(|a, b| bin[*a.1].aabb().half_area().total_cmp(&bin[*b.1].aabb().half_area()))
+                .map(|(i, _)| i);
+            let Some(i) = best else { break };
+            let k = kids.swap_remove(i);
+            kids.push(bin[k].first as usize);
+            kids.push(bin[k].first as usize + 1);
         }
-        self.stats.nodes = self.nodes.len();
-        self.stats.prim_refs = self.prims.len();
-        self.stats.bytes = self.nodes.len() * std::mem::size_of::<Node>() + self.prims.len() * 4;
-        self.stats.sah_cost = sah as f32;
+        let mut n = Node4 {
+            bounds: [
+                [f32::INFINITY; 4],
+                [f32::INFINITY; 4],
+                [f32::INFINITY; 4],
+                [f32::NEG_INFINITY; 4],
+                [f32::NEG_INFINITY; 4],
+                [f32::NEG_INFINITY; 4],
+            ],
+            child: [EMPTY; 4],
+        };
+        for (j, &k) in kids.iter().enumerate() {
+            let c = &bin[k];
+            for a in 0..3 {
+                n.bounds[a][j] = c.min[a];
+                n.bounds[3 + a][j] = c.max[a];
+            }
+            if c.count > 0 {
+                n.child[j] = LEAF | leaves.len() as u32;
+                leaves.push((c.first, c.count));
+            } else {
+                let idx = nodes.len();
+                nodes.push(Node4 { bounds: [[0.0; 4]; 6], child: [EMPTY; 4] });
+                n.child[j] = idx as u32;
+                todo.push((k, idx, depth + 1));
+            }
+        }
+        nodes[slot] = n;
+    }
+    (nodes, leaves, max_depth)
+}
+
+/// Per-ray data for the 4-wide slab test: origin, inverse direction, and for each axis which
+/// of the `bounds` rows holds the near plane (min for a positive direction, max otherwise).
+struct RayPre {
+    o: [f32; 3],
+    inv: [f32; 3],
+    near: [usize; 3],
+    far: [usize; 3],
+}
+
+impl RayPre {
+    #[inline]
+    fn new(ray: &Ray) -> RayPre {
+        let inv = ray.d.recip();
+        let near = [0, 1, 2].map(|a| if inv[a] < 0.0 { 3 + a } else { a });
+        RayPre { o: ray.o.to_array(), inv: inv.to_array(), near, far: near.map(|n| if n >= 3 { n - 3 } else { n + 3 }) }
+    }
+}
+
+/// Slab test of one ray against the four boxes of `n` within `[0, t_max]`: entry distances
+/// and a bit mask of the boxes hit. Same semantics as [`Aabb::slab`]: NaN from `0 · inf` is
+/// ignored, empty boxes never hit, and the exit distance is rounded up by a few ulps.
+#[inline(always)]
+fn slab4(n: &Node4, r: &RayPre, t_max: f32) -> ([f32; 4], u32) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: SSE is part of the x86_64 baseline; loads are unaligned-safe (`loadu`) from
+    // 16-byte arrays inside `n`, and stores go to a local array of four floats.
+    unsafe {
+        use std::arch::x86_64::*;
+        let b = &n.bounds;
+        let mut tn = _mm_setzero_ps();
+        let mut tf = _mm_set1_ps(t_max);
+        for a in 0..3 {
+            let o = _mm_set1_ps(r.o[a]);
+            let inv = _mm_set1_ps(r.inv[a]);
+            let t0 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(b[r.near[a]].as_ptr()), o), inv);
+            let t1 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(b[r.far[a]].as_ptr()), o), inv);
+            // maxps/minps return the second operand when either is NaN: keep the running
+            // value second so that NaN slab distances are ignored.
+            tn = _mm_max_ps(t0, tn);
+            tf = _mm_min_ps(t1, tf);
+        }
+        let tf = _mm_mul_ps(tf, _mm_set1_ps(1.0 + 4.0 * f32::EPSILON));
+        let mask = _mm_movemask_ps(_mm_cmple_ps(tn, tf)) as u32;
+        let mut out = [0.0f32; 4];
+        _mm_storeu_ps(out.as_mut_ptr(), tn);
+        (out, mask)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let b = &n.bounds;
+        let mut out = [0.0f32; 4];
+        let mut mask = 0;
+        for j in 0..4 {
+            let mut tn = 0.0f32;
+            let mut tf = t_max;
+            for a in 0..3 {
+                let t0 = (b[r.near[a]][j] - r.o[a]) * r.inv[a];
+                let t1 = (b[r.far[a]][j] - r.o[a]) * r.inv[a];
+                tn = if t0 > tn { t0 } else { tn };
+                tf = if t1 < tf { t1 } else { tf };
+            }
+            if tn <= tf * (1.0 + 4.0 * f32::EPSILON) {
+                mask |= 1 << j;
+            }
+            out[j] = tn;
+        }
+        (out, mask)
+    }
+}
+
+impl Bvh {
+    fn leaf(&self, child: u32) -> &[u32] {
+        let (first, count) = self.leaves[(child & !LEAF) as usize];
+        &self.prims[first as usize..(first + count) as usize]
+    }
+
+    /// The children of `n` hit within `t_max`, nearest last: `(count, refs, distances)`.
+    #[inline(always)]
+    fn hits(n: &Node4, r: &RayPre, t_max: f32) -> (usize, [u32; 4], [f32; 4]) {
+        let (t, mut mask) = slab4(n, r, t_max);
+        let mut refs = [0u32; 4];
+        let mut ts = [0.0f32; 4];
+        let mut k = 0;
+        while mask != 0 {
+            let j = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            // Insertion sort, descending distance.
+            let mut p = k;
+            while p > 0 && ts[p - 1] < t[j] {
+                ts[p] = ts[p - 1];
+                refs[p] = refs[p - 1];
+                p -= 1;
+            }
+            ts[p] = t[j];
+            refs[p] = n.child[j];
+            k += 1;
+        }
+        (k, refs, ts)
     }
 }
 
@@ -233,9 +373,7 @@ impl Accel for Bvh {
     type Params = BvhParams;
 
     fn build(boxes: &[Aabb], params: &BvhParams) -> Self {
-        let mut prims: Vec<u32> = (0..boxes.len() as u32)
-            .filter(|&i| !boxes[i as usize].is_empty())
-            .collect();
+        let mut prims: Vec<u32> = (0..boxes.len() as u32).filter(|&i| !boxes[i as usize].is_empty()).collect();
         let mut base = params.base;
         base.max_depth = base.max_depth.min(MAX_STACK - 1);
         base.max_leaf_prims = base.max_leaf_prims.max(1);
@@ -249,145 +387,133 @@ impl Accel for Bvh {
             leaves: 0,
         };
         if !prims.is_empty() {
-            b.nodes.push(Node {
-                min: [0.0; 3],
-                first: 0,
-                max: [0.0; 3],
-                count: 0,
-            });
+            b.nodes.push(Node { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 });
             b.build(0, &mut prims, 0, 0);
         }
+        let bin = b.nodes;
+        let sah_cost = binary_sah_cost(&bin, &base);
+        let (nodes, leaves, root_leaf) = match bin.first() {
+            None => (Vec::new(), Vec::new(), false),
+            Some(root) if root.count > 0 => (Vec::new(), vec![(root.first, root.count)], true),
+            Some(_) => {
+                let (n, l, _) = collapse(&bin);
+                (n, l, false)
+            }
+        };
         let stats = AccelStats {
+            nodes: nodes.len(),
+            leaves: leaves.len(),
             max_depth: b.max_depth_seen,
-            leaves: b.leaves,
-            ..Default::default()
+            prim_refs: prims.len(),
+            bytes: nodes.len() * std::mem::size_of::<Node4>() + leaves.len() * 8 + prims.len() * 4,
+            sah_cost,
         };
-        let mut bvh = Bvh {
-            nodes: b.nodes,
-            prims,
-            stats,
-        };
-        bvh.compute_stats(&base);
-        bvh
+        Bvh { nodes, leaves, prims, root_leaf, stats }
     }
 
-    fn closest(
-        &self,
-        ray: &Ray,
-        t_max: &mut f32,
-        mut test: impl FnMut(u32, f32) -> Option<f32>,
-    ) -> bool {
-        let Some(root) = self.nodes.first() else {
-            return false;
-        };
-        let inv_d = ray.d.recip();
-        if root.aabb().slab(ray.o, inv_d, 0.0, *t_max).is_none() {
-            return false;
-        }
-        let mut stack = [(0u32, 0.0f32); MAX_STACK];
-        let mut sp = 0usize;
-        let mut node = 0usize;
+    fn closest(&self, ray: &Ray, t_max: &mut f32, mut test: impl FnMut(u32, f32) -> Option<f32>) -> bool {
         let mut hit = false;
-        loop {
-            let n = &self.nodes[node];
-            if n.count > 0 {
-                let first = n.first as usize;
-                for &p in &self.prims[first..first + n.count as usize] {
-                    if let Some(t) = test(p, *t_max) {
-                        *t_max = t;
-                        hit = true;
-                    }
-                }
-            } else {
-                let l = n.first as usize;
-                let dl = self.nodes[l].aabb().slab(ray.o, inv_d, 0.0, *t_max);
-                let dr = self.nodes[l + 1].aabb().slab(ray.o, inv_d, 0.0, *t_max);
-                match (dl, dr) {
-                    (Some(a), Some(b)) => {
-                        let (near, far, tfar) = if a <= b { (l, l + 1, b) } else { (l + 1, l, a) };
-                        stack[sp] = (far as u32, tfar);
-                        sp += 1;
-                        node = near;
-                        continue;
-                    }
-                    (Some(_), None) => {
-                        node = l;
-                        continue;
-                    }
-                    (None, Some(_)) => {
-                        node = l + 1;
-                        continue;
-                    }
-                    (None, None) => {}
+        if self.root_leaf {
+            for &p in self.leaf(LEAF) {
+                if let Some(t) = test(p, *t_max) {
+                    *t_max = t;
+                    hit = true;
                 }
             }
-            // Pop the next node that may still hold a closer hit.
+            return hit;
+        }
+        if self.nodes.is_empty() {
+            return false;
+        }
+        let r = RayPre::new(ray);
+        // Uninitialised: zeroing 1.5 KiB per ray showed up in profiles. Only entries below `sp`
+        // are read, and each was written first.
+        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
+        stack[0].write((0, 0.0));
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            // SAFETY: stack[sp] was written before sp was raised past it.
+            let (mut cur, t_enter) = unsafe { stack[sp].assume_init() };
+            if t_enter > *t_max {
+                continue;
+            }
             loop {
-                if sp == 0 {
-                    return hit;
-                }
-                sp -= 1;
-                let (nd, t_enter) = stack[sp];
-                if t_enter <= *t_max {
-                    node = nd as usize;
+                if cur & LEAF != 0 {
+                    for &p in self.leaf(cur) {
+                        if let Some(t) = test(p, *t_max) {
+                            *t_max = t;
+                            hit = true;
+                        }
+                    }
                     break;
                 }
+                let (k, refs, ts) = Self::hits(&self.nodes[cur as usize], &r, *t_max);
+                if k == 0 {
+                    break;
+                }
+                for j in 0..k - 1 {
+                    stack[sp].write((refs[j], ts[j]));
+                    sp += 1;
+                }
+                cur = refs[k - 1];
             }
         }
+        hit
     }
 
     fn any(&self, ray: &Ray, t_max: f32, mut test: impl FnMut(u32, f32) -> bool) -> bool {
-        let Some(root) = self.nodes.first() else {
-            return false;
-        };
-        let inv_d = ray.d.recip();
-        if root.aabb().slab(ray.o, inv_d, 0.0, t_max).is_none() {
+        if self.root_leaf {
+            return self.leaf(LEAF).iter().any(|&p| test(p, t_max));
+        }
+        if self.nodes.is_empty() {
             return false;
         }
-        let mut stack = [0u32; MAX_STACK];
-        let mut sp = 0usize;
-        let mut node = 0usize;
-        loop {
-            let n = &self.nodes[node];
-            if n.count > 0 {
-                let first = n.first as usize;
-                if self.prims[first..first + n.count as usize]
-                    .iter()
-                    .any(|&p| test(p, t_max))
-                {
-                    return true;
-                }
-            } else {
-                let l = n.first as usize;
-                let hl = self.nodes[l]
-                    .aabb()
-                    .slab(ray.o, inv_d, 0.0, t_max)
-                    .is_some();
-                let hr = self.nodes[l + 1]
-                    .aabb()
-                    .slab(ray.o, inv_d, 0.0, t_max)
-                    .is_some();
-                if hl {
-                    if hr {
-                        stack[sp] = (l + 1) as u32;
-                        sp += 1;
-                    }
-                    node = l;
-                    continue;
-                } else if hr {
-                    node = l + 1;
-                    continue;
-                }
-            }
-            if sp == 0 {
-                return false;
-            }
+        let r = RayPre::new(ray);
+        let mut stack = [std::mem::MaybeUninit::<u32>::uninit(); 3 * MAX_STACK];
+        stack[0].write(0);
+        let mut sp = 1usize;
+        while sp > 0 {
             sp -= 1;
-            node = stack[sp] as usize;
+            // SAFETY: stack[sp] was written before sp was raised past it.
+            let mut cur = unsafe { stack[sp].assume_init() };
+            loop {
+                if cur & LEAF != 0 {
+                    if self.leaf(cur).iter().any(|&p| test(p, t_max)) {
+                        return true;
+                    }
+                    break;
+                }
+                let (k, refs, _) = Self::hits(&self.nodes[cur as usize], &r, t_max);
+                if k == 0 {
+                    break;
+                }
+                for &c in &refs[..k - 1] {
+                    stack[sp].write(c);
+                    sp += 1;
+                }
+                cur = refs[k - 1];
+            }
         }
+        false
     }
 
     fn stats(&self) -> AccelStats {
         self.stats
     }
+}
+
+/// SAH cost of the binary tree, relative to the root's area.
+fn binary_sah_cost(nodes: &[Node], params: &AccelParams) -> f32 {
+    let root_area = nodes.first().map_or(0.0, |n| n.aabb().half_area());
+    let mut sah = 0.0f64;
+    for n in nodes {
+        let a = if root_area > 0.0 { (n.aabb().half_area() / root_area) as f64 } else { 1.0 };
+        sah += if n.count > 0 {
+            a * params.intersect_cost as f64 * n.count as f64
+        } else {
+            a * params.traversal_cost as f64
+        };
+    }
+    sah as f32
 }

@@ -35,12 +35,7 @@ pub trait Accel: Send + Sync + Sized {
     /// Closest-hit query. Calls `test(prim, t_max)` for candidate primitives; `test` returns
     /// `Some(t)` for a hit with `t < t_max` (and records what it needs), after which only
     /// closer hits are sought. `t_max` is updated in place; returns whether anything was hit.
-    fn closest(
-        &self,
-        ray: &Ray,
-        t_max: &mut f32,
-        test: impl FnMut(u32, f32) -> Option<f32>,
-    ) -> bool;
+    fn closest(&self, ray: &Ray, t_max: &mut f32, test: impl FnMut(u32, f32) -> Option<f32>) -> bool;
 
     /// Any-hit query: stops at the first primitive for which `test(prim, t_max)` is true.
     fn any(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool;
@@ -65,12 +60,7 @@ pub struct AccelParams {
 
 impl Default for AccelParams {
     fn default() -> Self {
-        AccelParams {
-            max_leaf_prims: 4,
-            max_depth: 24,
-            traversal_cost: 1.0,
-            intersect_cost: 1.0,
-        }
+        AccelParams { max_leaf_prims: 4, max_depth: 24, traversal_cost: 1.0, intersect_cost: 1.0 }
     }
 }
 
@@ -123,10 +113,7 @@ impl AccelKind {
         match self {
             AccelKind::Brute => AnyWorld::Brute(World::build(scene, params)),
             AccelKind::Bvh(split) => {
-                let p = BvhParams {
-                    split,
-                    base: *params,
-                };
+                let p = BvhParams { split, base: *params };
                 AnyWorld::Bvh(World::build(scene, &p))
             }
         }
@@ -145,16 +132,10 @@ impl FromStr for AccelKind {
         if s == "default" || s == "bvh" {
             return Ok(AccelKind::DEFAULT);
         }
-        AccelKind::ALL
-            .into_iter()
-            .find(|k| k.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<_> = AccelKind::ALL.iter().map(|k| k.name()).collect();
-                format!(
-                    "unknown accelerator '{s}' (expected default, {})",
-                    names.join(", ")
-                )
-            })
+        AccelKind::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
+            let names: Vec<_> = AccelKind::ALL.iter().map(|k| k.name()).collect();
+            format!("unknown accelerator '{s}' (expected default, {})", names.join(", "))
+        })
     }
 }
 

@@ -15,17 +15,11 @@ impl Default for Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb {
-        min: Vec3::INFINITY,
-        max: Vec3::NEG_INFINITY,
-    };
+    pub const EMPTY: Aabb = Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY };
 
     #[inline]
     pub fn new(a: Vec3, b: Vec3) -> Aabb {
-        Aabb {
-            min: a.min(b),
-            max: a.max(b),
-        }
+        Aabb { min: a.min(b), max: a.max(b) }
     }
 
     #[inline]
@@ -44,18 +38,12 @@ impl Aabb {
 
     #[inline]
     pub fn grow(self, p: Vec3) -> Aabb {
-        Aabb {
-            min: self.min.min(p),
-            max: self.max.max(p),
-        }
+        Aabb { min: self.min.min(p), max: self.max.max(p) }
     }
 
     #[inline]
     pub fn union(self, o: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
-        }
+        Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
     }
 
     #[inline]
@@ -175,10 +163,7 @@ mod tests {
         // Pointing away.
         assert_eq!(hit(&b, Vec3::new(-1.0, 0.5, 0.5), -Vec3::X), None);
         // Beyond t_max.
-        assert_eq!(
-            b.slab(Vec3::new(-1.0, 0.5, 0.5), Vec3::X.recip(), 0.0, 0.5),
-            None
-        );
+        assert_eq!(b.slab(Vec3::new(-1.0, 0.5, 0.5), Vec3::X.recip(), 0.0, 0.5), None);
     }
 
     #[test]
@@ -204,14 +189,8 @@ mod tests {
     #[test]
     fn slab_ray_starting_inside() {
         let b = unit();
-        assert_eq!(
-            hit(&b, Vec3::splat(0.5), Vec3::new(0.3, -0.2, 0.9)),
-            Some(0.0)
-        );
-        assert_eq!(
-            b.slab(Vec3::splat(0.5), Vec3::X.recip(), 0.25, 10.0),
-            Some(0.25)
-        );
+        assert_eq!(hit(&b, Vec3::splat(0.5), Vec3::new(0.3, -0.2, 0.9)), Some(0.0));
+        assert_eq!(b.slab(Vec3::splat(0.5), Vec3::X.recip(), 0.25, 10.0), Some(0.25));
     }
 
     #[test]

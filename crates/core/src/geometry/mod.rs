@@ -16,8 +16,5 @@ pub fn orthonormal_basis(n: glam::Vec3) -> (glam::Vec3, glam::Vec3) {
     let sign = 1.0f32.copysign(n.z);
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
-    (
-        glam::Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
-        glam::Vec3::new(b, sign + n.y * n.y * a, -n.y),
-    )
+    (glam::Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), glam::Vec3::new(b, sign + n.y * n.y * a, -n.y))
 }

@@ -27,11 +27,7 @@ fn offset_component(p: f32, n: f32) -> f32 {
 #[inline]
 pub fn offset_ray_origin(p: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
     let n = if ng.dot(w) < 0.0 { -ng } else { ng };
-    Vec3::new(
-        offset_component(p.x, n.x),
-        offset_component(p.y, n.y),
-        offset_component(p.z, n.z),
-    )
+    Vec3::new(offset_component(p.x, n.x), offset_component(p.y, n.y), offset_component(p.z, n.z))
 }
 
 /// A ray leaving the surface point `p` (geometric normal `ng`) in direction `d`.
@@ -46,11 +42,7 @@ pub fn spawn_ray(p: Vec3, ng: Vec3, d: Vec3) -> Ray {
 #[inline]
 pub fn spawn_ray_to(p: Vec3, ng: Vec3, q: Vec3, nq: Vec3) -> (Ray, f32) {
     let o = offset_ray_origin(p, ng, q - p);
-    let target = if nq == Vec3::ZERO {
-        q
-    } else {
-        offset_ray_origin(q, nq, o - q)
-    };
+    let target = if nq == Vec3::ZERO { q } else { offset_ray_origin(q, nq, o - q) };
     (Ray::new(o, target - o), 1.0 - 1e-4)
 }
 
@@ -60,11 +52,7 @@ mod tests {
 
     #[test]
     fn offset_moves_to_the_requested_side() {
-        for p in [
-            Vec3::new(1e3, -2e3, 5.0),
-            Vec3::new(1e-3, 0.0, -1e-4),
-            Vec3::splat(-7.5),
-        ] {
+        for p in [Vec3::new(1e3, -2e3, 5.0), Vec3::new(1e-3, 0.0, -1e-4), Vec3::splat(-7.5)] {
             let n = Vec3::new(0.3, -0.5, 0.8).normalize();
             let up = offset_ray_origin(p, n, n);
             let down = offset_ray_origin(p, n, -n);

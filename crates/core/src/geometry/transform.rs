@@ -14,11 +14,8 @@ pub struct Transform {
 }
 
 impl Transform {
-    pub const IDENTITY: Transform = Transform {
-        m: Affine3A::IDENTITY,
-        inv: Affine3A::IDENTITY,
-        normal_m: Mat3::IDENTITY,
-    };
+    pub const IDENTITY: Transform =
+        Transform { m: Affine3A::IDENTITY, inv: Affine3A::IDENTITY, normal_m: Mat3::IDENTITY };
 
     /// `None` when `m` is singular or not finite.
     pub fn try_new(m: Affine3A) -> Option<Transform> {
@@ -57,10 +54,7 @@ impl Transform {
     /// World-space ray → object-space ray with the same parameter `t`.
     #[inline]
     pub fn ray_to_object(&self, r: &Ray) -> Ray {
-        Ray::new(
-            self.inv.transform_point3(r.o),
-            self.inv.transform_vector3(r.d),
-        )
+        Ray::new(self.inv.transform_point3(r.o), self.inv.transform_vector3(r.d))
     }
 
     /// The box of the 8 transformed corners of `b`.
@@ -73,10 +67,8 @@ impl Transform {
         let m = Mat3::from(self.m.matrix3);
         let s = m.x_axis.length();
         let mtm = m.transpose() * m;
-        let ok = (mtm - Mat3::from_diagonal(Vec3::splat(s * s)))
-            .to_cols_array()
-            .iter()
-            .all(|v| v.abs() <= 1e-4 * s * s);
+        let ok =
+            (mtm - Mat3::from_diagonal(Vec3::splat(s * s))).to_cols_array().iter().all(|v| v.abs() <= 1e-4 * s * s);
         ok.then_some(s)
     }
 }

@@ -42,11 +42,5 @@ impl RayStats {
 
 /// Computes the radiance arriving along a camera ray.
 pub trait Integrator: Sync {
-    fn radiance<A: Accel>(
-        &self,
-        world: &World<A>,
-        ray: &Ray,
-        rng: &mut Pcg32,
-        stats: &mut RayStats,
-    ) -> Rgb;
+    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb;
 }

@@ -35,10 +35,7 @@ pub struct Whitted {
 
 impl Default for Whitted {
     fn default() -> Self {
-        Whitted {
-            max_depth: 10,
-            min_attenuation: 1e-3,
-        }
+        Whitted { max_depth: 10, min_attenuation: 1e-3 }
     }
 }
 
@@ -55,13 +52,7 @@ struct Ctx<'a, 'w, A: Accel> {
 }
 
 impl Integrator for Whitted {
-    fn radiance<A: Accel>(
-        &self,
-        world: &World<A>,
-        ray: &Ray,
-        rng: &mut Pcg32,
-        stats: &mut RayStats,
-    ) -> Rgb {
+    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb {
         let mut ctx = Ctx { world, rng, stats };
         self.trace(&mut ctx, ray, 0, Rgb::ONE)
     }
@@ -82,11 +73,7 @@ impl Whitted {
             l += obj.emission;
         }
         // Opaque surfaces shade on the side the ray arrives from (two-sided).
-        let (ng, mut ns) = if front {
-            (hit.ng, hit.ns)
-        } else {
-            (-hit.ng, -hit.ns)
-        };
+        let (ng, mut ns) = if front { (hit.ng, hit.ns) } else { (-hit.ng, -hit.ns) };
         if ns.dot(wo) <= 0.0 {
             ns = ng;
         }
@@ -108,22 +95,9 @@ impl Whitted {
                     throughput,
                 );
             }
-            Material::Conductor {
-                eta,
-                k,
-                roughness: 0.0,
-            } => {
+            Material::Conductor { eta, k, roughness: 0.0 } => {
                 let f = conductor_fresnel(cos_o, eta, k);
-                l += self.child(
-                    cx,
-                    &hit,
-                    ng,
-                    fresnel::reflect(wo, ns),
-                    f,
-                    Kind::Reflection,
-                    depth,
-                    throughput,
-                );
+                l += self.child(cx, &hit, ng, fresnel::reflect(wo, ns), f, Kind::Reflection, depth, throughput);
             }
             Material::Glazed { ior, .. } => {
                 let f = fresnel::dielectric(cos_o, ior);
@@ -146,29 +120,11 @@ impl Whitted {
                 match fresnel::refract(wo, ns, eta) {
                     None => {
                         cx.stats.total_internal_reflections += 1;
-                        l += self.child(
-                            cx,
-                            &hit,
-                            ng,
-                            r,
-                            Rgb::ONE,
-                            Kind::Reflection,
-                            depth,
-                            throughput,
-                        );
+                        l += self.child(cx, &hit, ng, r, Rgb::ONE, Kind::Reflection, depth, throughput);
                     }
                     Some(t) => {
                         let f = fresnel::dielectric(cos, eta);
-                        l += self.child(
-                            cx,
-                            &hit,
-                            ng,
-                            r,
-                            Rgb::splat(f),
-                            Kind::Reflection,
-                            depth,
-                            throughput,
-                        );
+                        l += self.child(cx, &hit, ng, r, Rgb::splat(f), Kind::Reflection, depth, throughput);
                         let w = transmittance * ((1.0 - f) / (eta * eta));
                         l += self.child(cx, &hit, ng, t, w, Kind::Refraction, depth, throughput);
                     }
@@ -212,15 +168,7 @@ impl Whitted {
     }
 
     /// Direct light from every light source, with shadow rays.
-    fn direct<A: Accel>(
-        &self,
-        cx: &mut Ctx<A>,
-        hit: &Intersection,
-        m: &Material,
-        ng: Vec3,
-        ns: Vec3,
-        wo: Vec3,
-    ) -> Rgb {
+    fn direct<A: Accel>(&self, cx: &mut Ctx<A>, hit: &Intersection, m: &Material, ng: Vec3, ns: Vec3, wo: Vec3) -> Rgb {
         let mut sum = Rgb::ZERO;
         for (li, light) in cx.world.lights.iter().enumerate() {
             let n = light.samples();
@@ -239,8 +187,7 @@ impl Whitted {
                 }
                 cx.stats.shadow += 1;
                 let blocked = if ls.infinite {
-                    cx.world
-                        .occluded(&spawn_ray(hit.p, ng, ls.wi), f32::INFINITY)
+                    cx.world.occluded(&spawn_ray(hit.p, ng, ls.wi), f32::INFINITY)
                 } else {
                     let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p, ls.n);
                     cx.world.occluded(&r, t_max)

@@ -75,20 +75,14 @@ impl Complex {
         Complex::new(self.re - o.re, self.im - o.im)
     }
     fn mul(self, o: Complex) -> Complex {
-        Complex::new(
-            self.re * o.re - self.im * o.im,
-            self.re * o.im + self.im * o.re,
-        )
+        Complex::new(self.re * o.re - self.im * o.im, self.re * o.im + self.im * o.re)
     }
     fn scale(self, s: f32) -> Complex {
         Complex::new(self.re * s, self.im * s)
     }
     fn div(self, o: Complex) -> Complex {
         let d = o.re * o.re + o.im * o.im;
-        Complex::new(
-            (self.re * o.re + self.im * o.im) / d,
-            (self.im * o.re - self.re * o.im) / d,
-        )
+        Complex::new((self.re * o.re + self.im * o.im) / d, (self.im * o.re - self.re * o.im) / d)
     }
     fn norm(self) -> f32 {
         self.re * self.re + self.im * self.im
@@ -189,12 +183,7 @@ mod tests {
     #[test]
     fn snell_law_holds_and_vector_is_unit_and_coplanar() {
         let n = Vec3::new(0.2, 0.9, -0.1).normalize();
-        for (eta, deg) in [
-            (1.5f32, 30.0f32),
-            (1.33, 75.0),
-            (2.42, 5.0),
-            (1.0 / 1.5, 35.0),
-        ] {
+        for (eta, deg) in [(1.5f32, 30.0f32), (1.33, 75.0), (2.42, 5.0), (1.0 / 1.5, 35.0)] {
             let (s, _) = crate::geometry::orthonormal_basis(n);
             let th = deg.to_radians();
             let wi = (n * th.cos() + s * th.sin()).normalize();
@@ -205,11 +194,7 @@ mod tests {
             // n1 sin θ1 = n2 sin θ2 with n1 = 1, n2 = eta.
             let sin_i = wi.cross(n).length();
             let sin_t = wt.cross(-n).length();
-            assert!(
-                (sin_i - eta * sin_t).abs() < 1e-5,
-                "eta {eta}: {sin_i} vs {}",
-                eta * sin_t
-            );
+            assert!((sin_i - eta * sin_t).abs() < 1e-5, "eta {eta}: {sin_i} vs {}", eta * sin_t);
             // In the plane of incidence spanned by wi and n.
             assert!(wt.dot(wi.cross(n).normalize()).abs() < 1e-5);
             // Normal incidence passes straight through.

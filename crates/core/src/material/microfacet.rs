@@ -57,9 +57,7 @@ mod tests {
                 let th = (i as f32 + 0.5) / nt as f32 * std::f32::consts::FRAC_PI_2;
                 let h = Vec3::new(th.sin(), 0.0, th.cos());
                 let dth = std::f32::consts::FRAC_PI_2 / nt as f32;
-                sum +=
-                    (ggx_d(Vec3::Z, h, alpha) * th.cos() * th.sin() * dth * std::f32::consts::TAU)
-                        as f64;
+                sum += (ggx_d(Vec3::Z, h, alpha) * th.cos() * th.sin() * dth * std::f32::consts::TAU) as f64;
             }
             let _ = np;
             assert!((sum - 1.0).abs() < 1e-2, "alpha {alpha}: {sum}");

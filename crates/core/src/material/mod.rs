@@ -56,12 +56,7 @@ pub enum Material {
     Diffuse { albedo: Texture },
     /// Lambertian base plus a rough specular highlight (GGX, Fresnel of a dielectric with
     /// index `ior`, scaled by `specular`) for direct light: a plastic-like surface.
-    Glossy {
-        albedo: Texture,
-        specular: Rgb,
-        roughness: f32,
-        ior: f32,
-    },
+    Glossy { albedo: Texture, specular: Rgb, roughness: f32, ior: f32 },
     /// Metal with Fresnel from the complex index of refraction `eta + i·k` per RGB channel.
     /// `roughness = 0`: ideal mirror (recursive reflection); `roughness > 0`: GGX highlight
     /// for direct light only.
@@ -105,17 +100,11 @@ impl Material {
         }
         match *self {
             Material::Diffuse { albedo } => albedo.eval(uv) * (FRAC_1_PI * cos_i),
-            Material::Glossy {
-                albedo,
-                specular,
-                roughness,
-                ior,
-            } => {
+            Material::Glossy { albedo, specular, roughness, ior } => {
                 let (spec, cos_h) = microfacet::cook_torrance(n, wo, wi, roughness.max(1e-3));
                 let f = fresnel::dielectric(cos_h, ior);
                 // The base sees only light the coat lets through, on the way in and out.
-                let t = (1.0 - fresnel::dielectric(cos_i, ior))
-                    * (1.0 - fresnel::dielectric(n.dot(wo), ior));
+                let t = (1.0 - fresnel::dielectric(cos_i, ior)) * (1.0 - fresnel::dielectric(n.dot(wo), ior));
                 (albedo.eval(uv) * (FRAC_1_PI * t) + specular * (spec * f)) * cos_i
             }
             Material::Conductor { eta, k, roughness } => {
@@ -123,8 +112,7 @@ impl Material {
                 conductor_fresnel(cos_h, eta, k) * (spec * cos_i)
             }
             Material::Glazed { ior, base } => {
-                let t = (1.0 - fresnel::dielectric(cos_i, ior))
-                    * (1.0 - fresnel::dielectric(n.dot(wo), ior));
+                let t = (1.0 - fresnel::dielectric(cos_i, ior)) * (1.0 - fresnel::dielectric(n.dot(wo), ior));
                 base * (FRAC_1_PI * t * cos_i)
             }
             Material::Mirror { .. } | Material::Dielectric { .. } => Rgb::ZERO,
@@ -144,26 +132,10 @@ pub fn conductor_fresnel(cos_i: f32, eta: Rgb, k: Rgb) -> Rgb {
 /// Named metals: `(name, eta, k)` at the red, green and blue primaries (the values Mitsuba and
 /// pbrt scenes commonly use, from measured spectra).
 pub const METALS: [(&str, [f32; 3], [f32; 3]); 4] = [
-    (
-        "gold",
-        [0.143119, 0.374957, 1.44248],
-        [3.98316, 2.38572, 1.60322],
-    ),
-    (
-        "silver",
-        [0.155265, 0.116723, 0.138342],
-        [4.82835, 3.12225, 2.14696],
-    ),
-    (
-        "copper",
-        [0.200438, 0.924033, 1.10221],
-        [3.91295, 2.45285, 2.14219],
-    ),
-    (
-        "aluminium",
-        [1.65746, 0.880369, 0.521229],
-        [9.22387, 6.26952, 4.837],
-    ),
+    ("gold", [0.143119, 0.374957, 1.44248], [3.98316, 2.38572, 1.60322]),
+    ("silver", [0.155265, 0.116723, 0.138342], [4.82835, 3.12225, 2.14696]),
+    ("copper", [0.200438, 0.924033, 1.10221], [3.91295, 2.45285, 2.14219]),
+    ("aluminium", [1.65746, 0.880369, 0.521229], [9.22387, 6.26952, 4.837]),
 ];
 
 /// Looks up a metal by name (also the chemical symbols and "aluminum").
@@ -175,26 +147,15 @@ pub fn metal(name: &str) -> Option<(Rgb, Rgb)> {
         "al" | "aluminium" | "aluminum" => "aluminium",
         _ => return None,
     };
-    METALS
-        .iter()
-        .find(|m| m.0 == canonical)
-        .map(|m| (Rgb::from(m.1), Rgb::from(m.2)))
+    METALS.iter().find(|m| m.0 == canonical).map(|m| (Rgb::from(m.1), Rgb::from(m.2)))
 }
 
 /// Named indices of refraction for dielectrics.
-pub const IORS: [(&str, f32); 6] = [
-    ("air", 1.0),
-    ("water", 1.33),
-    ("glass", 1.5),
-    ("optical-glass", 1.5168),
-    ("bk7", 1.5168),
-    ("diamond", 2.42),
-];
+pub const IORS: [(&str, f32); 6] =
+    [("air", 1.0), ("water", 1.33), ("glass", 1.5), ("optical-glass", 1.5168), ("bk7", 1.5168), ("diamond", 2.42)];
 
 pub fn named_ior(name: &str) -> Option<f32> {
-    IORS.iter()
-        .find(|(n, _)| n.eq_ignore_ascii_case(name))
-        .map(|(_, v)| *v)
+    IORS.iter().find(|(n, _)| n.eq_ignore_ascii_case(name)).map(|(_, v)| *v)
 }
 
 #[cfg(test)]
@@ -203,9 +164,7 @@ mod tests {
 
     #[test]
     fn lambertian_is_albedo_over_pi_times_cosine() {
-        let m = Material::Diffuse {
-            albedo: Rgb::splat(0.5).into(),
-        };
+        let m = Material::Diffuse { albedo: Rgb::splat(0.5).into() };
         let wi = Vec3::new(0.6, 0.0, 0.8);
         let v = m.eval_direct(Vec3::Z, Vec3::Z, wi, Vec2::ZERO);
         assert!((v.x - 0.5 * FRAC_1_PI * 0.8).abs() < 1e-7);
@@ -214,18 +173,12 @@ mod tests {
 
     #[test]
     fn glossy_highlight_peaks_in_mirror_direction() {
-        let m = Material::Glossy {
-            albedo: Rgb::ZERO.into(),
-            specular: Rgb::ONE,
-            roughness: 0.1,
-            ior: 1.5,
-        };
+        let m = Material::Glossy { albedo: Rgb::ZERO.into(), specular: Rgb::ONE, roughness: 0.1, ior: 1.5 };
         let wo = Vec3::new(0.5, 0.0, 0.866).normalize();
         let mirror = fresnel::reflect(wo, Vec3::Z);
         let off = Vec3::new(-0.2, 0.3, 0.93).normalize();
         assert!(
-            m.eval_direct(Vec3::Z, wo, mirror, Vec2::ZERO).x
-                > 10.0 * m.eval_direct(Vec3::Z, wo, off, Vec2::ZERO).x
+            m.eval_direct(Vec3::Z, wo, mirror, Vec2::ZERO).x > 10.0 * m.eval_direct(Vec3::Z, wo, off, Vec2::ZERO).x
         );
     }
 
@@ -233,21 +186,9 @@ mod tests {
     fn rough_materials_do_not_create_energy() {
         // Directional albedo ∫ f cos dω ≤ 1 by quadrature, for a few view angles.
         let mats = [
-            Material::Glossy {
-                albedo: Rgb::ONE.into(),
-                specular: Rgb::ONE,
-                roughness: 0.3,
-                ior: 1.5,
-            },
-            Material::Conductor {
-                eta: Rgb::splat(0.2),
-                k: Rgb::splat(3.0),
-                roughness: 0.2,
-            },
-            Material::Glazed {
-                ior: 1.5,
-                base: Rgb::ONE,
-            },
+            Material::Glossy { albedo: Rgb::ONE.into(), specular: Rgb::ONE, roughness: 0.3, ior: 1.5 },
+            Material::Conductor { eta: Rgb::splat(0.2), k: Rgb::splat(3.0), roughness: 0.2 },
+            Material::Glazed { ior: 1.5, base: Rgb::ONE },
         ];
         for m in mats {
             for deg in [0.0f32, 45.0, 80.0] {
@@ -272,11 +213,7 @@ mod tests {
 
     #[test]
     fn checker_alternates() {
-        let t = Texture::Checker {
-            a: Rgb::ONE,
-            b: Rgb::ZERO,
-            scale: 4.0,
-        };
+        let t = Texture::Checker { a: Rgb::ONE, b: Rgb::ZERO, scale: 4.0 };
         assert_eq!(t.eval(Vec2::new(0.1, 0.1)), Rgb::ONE);
         assert_eq!(t.eval(Vec2::new(0.3, 0.1)), Rgb::ZERO);
         assert_eq!(t.eval(Vec2::new(0.3, 0.3)), Rgb::ONE);

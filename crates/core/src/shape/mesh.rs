@@ -17,22 +17,10 @@ pub struct Mesh {
 /// Why a mesh is invalid.
 #[derive(Clone, Debug, PartialEq)]
 pub enum MeshError {
-    NonFiniteVertex {
-        vertex: usize,
-    },
-    IndexOutOfRange {
-        triangle: usize,
-        index: u32,
-        vertices: usize,
-    },
-    AttributeLength {
-        attribute: &'static str,
-        len: usize,
-        vertices: usize,
-    },
-    TooManyVertices {
-        vertices: usize,
-    },
+    NonFiniteVertex { vertex: usize },
+    IndexOutOfRange { triangle: usize, index: u32, vertices: usize },
+    AttributeLength { attribute: &'static str, len: usize, vertices: usize },
+    TooManyVertices { vertices: usize },
 }
 
 impl fmt::Display for MeshError {
@@ -41,18 +29,10 @@ impl fmt::Display for MeshError {
             MeshError::NonFiniteVertex { vertex } => {
                 write!(f, "vertex {vertex} has a NaN or infinite coordinate")
             }
-            MeshError::IndexOutOfRange {
-                triangle,
-                index,
-                vertices,
-            } => {
+            MeshError::IndexOutOfRange { triangle, index, vertices } => {
                 write!(f, "triangle {triangle} uses vertex index {index}, but the mesh has {vertices} vertices")
             }
-            MeshError::AttributeLength {
-                attribute,
-                len,
-                vertices,
-            } => {
+            MeshError::AttributeLength { attribute, len, vertices } => {
                 write!(f, "{len} {attribute} for {vertices} vertices")
             }
             MeshError::TooManyVertices { vertices } => {
@@ -78,11 +58,7 @@ impl Mesh {
         }
         for (triangle, t) in self.indices.iter().enumerate() {
             if let Some(&index) = t.iter().find(|&&i| i as usize >= n) {
-                return Err(MeshError::IndexOutOfRange {
-                    triangle,
-                    index,
-                    vertices: n,
-                });
+                return Err(MeshError::IndexOutOfRange { triangle, index, vertices: n });
             }
         }
         if let Some(uv) = &self.uvs {
@@ -96,16 +72,9 @@ impl Mesh {
         }
         if let Some(nn) = &self.normals {
             if nn.len() != n {
-                return Err(MeshError::AttributeLength {
-                    attribute: "normals",
-                    len: nn.len(),
-                    vertices: n,
-                });
+                return Err(MeshError::AttributeLength { attribute: "normals", len: nn.len(), vertices: n });
             }
-            if nn
-                .iter()
-                .any(|v| !v.is_finite() || v.length_squared() == 0.0)
-            {
+            if nn.iter().any(|v| !v.is_finite() || v.length_squared() == 0.0) {
                 self.normals = None;
             }
         }
@@ -115,11 +84,7 @@ impl Mesh {
     #[inline]
     pub fn triangle(&self, i: usize) -> [Vec3; 3] {
         let [a, b, c] = self.indices[i];
-        [
-            self.positions[a as usize],
-            self.positions[b as usize],
-            self.positions[c as usize],
-        ]
+        [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
     }
 
     pub fn triangle_aabb(&self, i: usize) -> Aabb {
@@ -128,10 +93,7 @@ impl Mesh {
 
     pub fn aabb(&self) -> Aabb {
         // Only vertices that triangles use.
-        self.indices
-            .iter()
-            .flatten()
-            .fold(Aabb::EMPTY, |b, &i| b.grow(self.positions[i as usize]))
+        self.indices.iter().flatten().fold(Aabb::EMPTY, |b, &i| b.grow(self.positions[i as usize]))
     }
 
     pub fn triangle_area(&self, i: usize) -> f32 {
@@ -151,35 +113,15 @@ impl Mesh {
         let b = Aabb::new(min, max);
         let positions = b.corners().to_vec();
         // Corner index bits: x = 1, y = 2, z = 4. Faces wound counter-clockwise seen from outside.
-        let quads: [[u32; 4]; 6] = [
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-        ];
-        let indices = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        Mesh {
-            positions,
-            normals: None,
-            uvs: None,
-            indices,
-        }
+        let quads: [[u32; 4]; 6] = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
+        let indices = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
+        Mesh { positions, normals: None, uvs: None, indices }
     }
 
     /// A parallelogram `corner + s·edge1 + t·edge2`, `s, t ∈ [0, 1]`, facing `edge1 × edge2`.
     pub fn quad(corner: Vec3, edge1: Vec3, edge2: Vec3) -> Mesh {
         Mesh {
-            positions: vec![
-                corner,
-                corner + edge1,
-                corner + edge1 + edge2,
-                corner + edge2,
-            ],
+            positions: vec![corner, corner + edge1, corner + edge1 + edge2, corner + edge2],
             normals: None,
             uvs: Some(vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y]),
             indices: vec![[0, 1, 2], [0, 2, 3]],
@@ -206,15 +148,9 @@ mod tests {
     fn validation_catches_bad_meshes() {
         let mut m = Mesh::cuboid(Vec3::ZERO, Vec3::ONE);
         m.indices.push([0, 1, 8]);
-        assert!(matches!(
-            m.validate(),
-            Err(MeshError::IndexOutOfRange { index: 8, .. })
-        ));
+        assert!(matches!(m.validate(), Err(MeshError::IndexOutOfRange { index: 8, .. })));
         let mut m = Mesh::cuboid(Vec3::ZERO, Vec3::ONE);
         m.positions[3].y = f32::NAN;
-        assert!(matches!(
-            m.validate(),
-            Err(MeshError::NonFiniteVertex { vertex: 3 })
-        ));
+        assert!(matches!(m.validate(), Err(MeshError::NonFiniteVertex { vertex: 3 })));
     }
 }

@@ -11,10 +11,7 @@ pub struct Sphere {
 
 impl Sphere {
     pub fn aabb(&self) -> Aabb {
-        Aabb::new(
-            self.center - Vec3::splat(self.radius),
-            self.center + Vec3::splat(self.radius),
-        )
+        Aabb::new(self.center - Vec3::splat(self.radius), self.center + Vec3::splat(self.radius))
     }
 }
 
@@ -62,14 +59,10 @@ mod tests {
 
     #[test]
     fn sphere_hits_front_then_back_from_inside() {
-        let s = Sphere {
-            center: Vec3::new(0.0, 0.0, -5.0),
-            radius: 1.0,
-        };
+        let s = Sphere { center: Vec3::new(0.0, 0.0, -5.0), radius: 1.0 };
         let t = intersect_sphere(&s, Vec3::ZERO, -Vec3::Z, f32::INFINITY).unwrap();
         assert!((t - 4.0).abs() < 1e-5);
-        let t =
-            intersect_sphere(&s, Vec3::new(0.0, 0.0, -5.0), -Vec3::Z * 2.0, f32::INFINITY).unwrap();
+        let t = intersect_sphere(&s, Vec3::new(0.0, 0.0, -5.0), -Vec3::Z * 2.0, f32::INFINITY).unwrap();
         assert!((t - 0.5).abs() < 1e-6);
         assert!(intersect_sphere(&s, Vec3::ZERO, Vec3::Z, f32::INFINITY).is_none());
         assert!(intersect_sphere(&s, Vec3::new(0.0, 1.01, 0.0), -Vec3::Z, f32::INFINITY).is_none());
@@ -77,10 +70,7 @@ mod tests {
 
     #[test]
     fn tiny_far_sphere_is_accurate() {
-        let s = Sphere {
-            center: Vec3::new(0.0, 0.0, -1e4),
-            radius: 1e-2,
-        };
+        let s = Sphere { center: Vec3::new(0.0, 0.0, -1e4), radius: 1e-2 };
         let t = intersect_sphere(&s, Vec3::ZERO, -Vec3::Z, f32::INFINITY).unwrap();
         assert!((t - (1e4 - 1e-2)).abs() < 2e-3, "{t}");
     }

@@ -39,15 +39,7 @@ impl WatertightRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        WatertightRay {
-            o,
-            kx,
-            ky,
-            kz,
-            sx: d[kx] / d[kz],
-            sy: d[ky] / d[kz],
-            sz: 1.0 / d[kz],
-        }
+        WatertightRay { o, kx, ky, kz, sx: d[kx] / d[kz], sy: d[ky] / d[kz], sz: 1.0 / d[kz] }
     }
 }
 
@@ -60,15 +52,18 @@ pub struct TriHit {
     pub b2: f32,
 }
 
+/// Recomputes edge functions in `f64` when one came out exactly zero in `f32` (rare: the ray
+/// passes through an edge or vertex to within rounding), so that the sign is right.
+#[cold]
+#[inline(never)]
+fn edge_functions_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (f32, f32, f32) {
+    let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+    ((cx * by - cy * bx) as f32, (ax * cy - ay * cx) as f32, (bx * ay - by * ax) as f32)
+}
+
 /// Intersects the triangle `(p0, p1, p2)` with the ray, accepting `0 < t < t_max`.
-#[inline]
-pub fn intersect_triangle(
-    r: &WatertightRay,
-    p0: Vec3,
-    p1: Vec3,
-    p2: Vec3,
-    t_max: f32,
-) -> Option<TriHit> {
+#[inline(always)]
+pub fn intersect_triangle(r: &WatertightRay, p0: Vec3, p1: Vec3, p2: Vec3, t_max: f32) -> Option<TriHit> {
     let a = p0 - r.o;
     let b = p1 - r.o;
     let c = p2 - r.o;
@@ -83,12 +78,7 @@ pub fn intersect_triangle(
     let mut v = ax * cy - ay * cx;
     let mut w = bx * ay - by * ax;
     if u == 0.0 || v == 0.0 || w == 0.0 {
-        let (ax, ay, bx, by, cx, cy) = (
-            ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
-        );
-        u = (cx * by - cy * bx) as f32;
-        v = (ax * cy - ay * cx) as f32;
-        w = (bx * ay - by * ax) as f32;
+        (u, v, w) = edge_functions_f64(ax, ay, bx, by, cx, cy);
     }
     if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
         return None;
@@ -102,11 +92,7 @@ pub fn intersect_triangle(
     let cz = r.sz * c[kz];
     let t_scaled = u * az + v * bz + w * cz;
     // Compare t = t_scaled / det against (0, t_max) without dividing.
-    let (ts, d) = if det < 0.0 {
-        (-t_scaled, -det)
-    } else {
-        (t_scaled, det)
-    };
+    let (ts, d) = if det < 0.0 { (-t_scaled, -det) } else { (t_scaled, det) };
     if ts <= 0.0 || ts > t_max * d {
         return None;
     }
@@ -115,11 +101,7 @@ pub fn intersect_triangle(
     if !(t > 0.0 && t < t_max) {
         return None;
     }
-    Some(TriHit {
-        t,
-        b1: v * inv,
-        b2: w * inv,
-    })
+    Some(TriHit { t, b1: v * inv, b2: w * inv })
 }
 
 #[cfg(test)]
@@ -130,11 +112,7 @@ mod tests {
         intersect_triangle(&WatertightRay::new(o, d), p[0], p[1], p[2], f32::INFINITY)
     }
 
-    const T: [Vec3; 3] = [
-        Vec3::new(0.0, 0.0, 0.0),
-        Vec3::new(1.0, 0.0, 0.0),
-        Vec3::new(0.0, 1.0, 0.0),
-    ];
+    const T: [Vec3; 3] = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
 
     #[test]
     fn hits_inside_with_barycentrics() {
@@ -164,28 +142,13 @@ mod tests {
     #[test]
     fn shared_edge_is_never_slipped_through() {
         // Two triangles sharing the diagonal of the unit square; rays exactly along it.
-        let a = [
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-        ];
-        let b = [
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-        ];
+        let a = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0)];
+        let b = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
         for i in 0..=100 {
             let s = i as f32 / 100.0;
-            for d in [
-                -Vec3::Z,
-                Vec3::new(0.3, -0.1, -1.0),
-                Vec3::new(-0.7, 0.9, -0.2),
-            ] {
+            for d in [-Vec3::Z, Vec3::new(0.3, -0.1, -1.0), Vec3::new(-0.7, 0.9, -0.2)] {
                 let o = Vec3::new(s, s, 0.0) - d * 3.0;
-                assert!(
-                    tri(o, d, a).is_some() || tri(o, d, b).is_some(),
-                    "slipped at s={s} d={d}"
-                );
+                assert!(tri(o, d, a).is_some() || tri(o, d, b).is_some(), "slipped at s={s} d={d}");
             }
         }
     }
