@@ -37,6 +37,12 @@ pub struct BenchArgs {
     width: u32,
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=16384))]
     height: u32,
+    /// Largest leaf of the top-down builds.
+    #[arg(long, default_value_t = AccelParams::default().max_leaf_prims as u32, value_parser = clap::value_parser!(u32).range(1..=255))]
+    max_leaf: u32,
+    /// Depth limit of the top-down builds (the lecture's 24 by default).
+    #[arg(long, default_value_t = AccelParams::default().max_depth as u32, value_parser = clap::value_parser!(u32).range(1..=63))]
+    max_depth: u32,
 }
 
 /// One line of results.
@@ -199,8 +205,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
         );
     }
     for kind in kinds {
-        let params = AccelParams::default();
-        let (world, build_s) = timed(args.reps, || kind.build_world(&scene, &params));
+        let params = AccelParams {
+            max_leaf_prims: args.max_leaf as usize,
+            max_depth: args.max_depth as usize,
+            ..AccelParams::default()
+        };
+        let (world, build_s) = pool.install(|| timed(args.reps, || kind.build_world(&scene, &params)));
         let rows = pool.install(|| with_world!(&world, w => measure(w, kind, build_s * 1e3, &work, args.reps)));
         for r in rows {
             if args.json {

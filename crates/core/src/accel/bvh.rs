@@ -70,15 +70,19 @@ pub struct Bvh {
 const MAX_STACK: usize = 64;
 const BINS: usize = 16;
 
+/// The binary builder. It only reads shared data, so subtrees build in parallel.
+///
+/// Binary layout: depth first. An interior node's left child is the next node; `first` holds
+/// the index of its right child.
 struct Builder<'a> {
     boxes: &'a [Aabb],
     centroids: Vec<glam::Vec3>,
     params: AccelParams,
     split: SplitMethod,
-    nodes: Vec<Node>,
-    max_depth_seen: usize,
-    leaves: usize,
 }
+
+/// Subtrees with more primitives than this are built as separate tasks.
+const PARALLEL_BUILD_MIN: usize = 16 * 1024;
 
 impl Builder<'_> {
     fn bounds(&self, prims: &[u32]) -> (Aabb, Aabb) {
@@ -87,32 +91,39 @@ impl Builder<'_> {
         })
     }
 
-    fn make_leaf(&mut self, node: usize, offset: usize, n: usize) {
-        self.nodes[node].first = offset as u32;
-        self.nodes[node].count = n as u32;
-        self.leaves += 1;
-    }
-
-    /// Builds node `node` over `prims`, which sit at `offset` in the final primitive array.
-    fn build(&mut self, node: usize, prims: &mut [u32], offset: usize, depth: usize) {
+    /// Appends the subtree over `prims` (which sit at `offset` in the final primitive array)
+    /// to `out`, depth first, with node indices relative to `base + out.len()`.
+    fn build_into(&self, out: &mut Vec<Node>, base: usize, prims: &mut [u32], offset: usize, depth: usize) {
         let (bounds, cbounds) = self.bounds(prims);
-        self.nodes[node].min = bounds.min.into();
-        self.nodes[node].max = bounds.max.into();
-        self.max_depth_seen = self.max_depth_seen.max(depth);
         let n = prims.len();
+        let me = out.len();
+        out.push(Node { min: bounds.min.into(), first: offset as u32, max: bounds.max.into(), count: n as u32 });
         if n <= self.params.max_leaf_prims || depth >= self.params.max_depth {
-            return self.make_leaf(node, offset, n);
+            return;
         }
         let mid = self.partition(prims, &bounds, &cbounds);
-        let left = self.nodes.len();
-        let empty = Node { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 };
-        self.nodes.push(empty);
-        self.nodes.push(empty);
-        self.nodes[node].first = left as u32;
-        self.nodes[node].count = 0;
         let (l, r) = prims.split_at_mut(mid);
-        self.build(left, l, offset, depth + 1);
-        self.build(left + 1, r, offset + mid, depth + 1);
+        if n >= PARALLEL_BUILD_MIN {
+            let (ln, rn) =
+                rayon::join(|| self.subtree(l, offset, depth + 1), || self.subtree(r, offset + mid, depth + 1));
+            let left_at = base + out.len();
+            append_relocated(out, &ln, left_at);
+            let right_at = base + out.len();
+            append_relocated(out, &rn, right_at);
+            out[me].first = right_at as u32;
+        } else {
+            self.build_into(out, base, l, offset, depth + 1);
+            out[me].first = (base + out.len()) as u32;
+            self.build_into(out, base, r, offset + mid, depth + 1);
+        }
+        out[me].count = 0;
+    }
+
+    /// A subtree in its own vector, indices relative to its start.
+    fn subtree(&self, prims: &mut [u32], offset: usize, depth: usize) -> Vec<Node> {
+        let mut v = Vec::with_capacity(2 * prims.len() / self.params.max_leaf_prims + 1);
+        self.build_into(&mut v, 0, prims, offset, depth);
+        v
     }
 
     /// Reorders `prims` and returns the split index, always in `1..n`.
@@ -199,6 +210,11 @@ impl Builder<'_> {
     }
 }
 
+/// Appends `sub` (indices relative to its start) to `out`, moving it to start at `at`.
+fn append_relocated(out: &mut Vec<Node>, sub: &[Node], at: usize) {
+    out.extend(sub.iter().map(|n| if n.count == 0 { Node { first: n.first + at as u32, ..*n } } else { *n }));
+}
+
 /// Moves the elements satisfying `pred` to the front; returns how many there are.
 fn partition_in_place(v: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
     let mut i = 0;
@@ -222,7 +238,7 @@ fn collapse(bin: &[Node]) -> (Vec<Node4>, Vec<(u32, u32)>, usize) {
     nodes.push(Node4 { bounds: [[0.0; 4]; 6], child: [EMPTY; 4] });
     while let Some((b, slot, depth)) = todo.pop() {
         max_depth = max_depth.max(depth);
-        let mut kids: Vec<usize> = vec![bin[b].first as usize, bin[b].first as usize + 1];
+        let mut kids: Vec<usize> = vec![b + 1, bin[b].first as usize];
         while kids.len() < 4 {
             // Open the interior child with the largest surface area.
             let best = kids
@@ -233,8 +249,8 @@ fn collapse(bin: &[Node]) -> (Vec<Node4>, Vec<(u32, u32)>, usize) {
                 .map(|(i, _)| i);
             let Some(i) = best else { break };
             let k = kids.swap_remove(i);
+            kids.push(k + 1);
             kids.push(bin[k].first as usize);
-            kids.push(bin[k].first as usize + 1);
         }
         let mut n = Node4 {
             bounds: [
@@ -377,20 +393,10 @@ impl Accel for Bvh {
         let mut base = params.base;
         base.max_depth = base.max_depth.min(MAX_STACK - 1);
         base.max_leaf_prims = base.max_leaf_prims.max(1);
-        let mut b = Builder {
-            boxes,
-            centroids: boxes.iter().map(|b| b.center()).collect(),
-            params: base,
-            split: params.split,
-            nodes: Vec::with_capacity(2 * prims.len() / base.max_leaf_prims.max(1) + 1),
-            max_depth_seen: 0,
-            leaves: 0,
-        };
-        if !prims.is_empty() {
-            b.nodes.push(Node { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 });
-            b.build(0, &mut prims, 0, 0);
-        }
-        let bin = b.nodes;
+        let b =
+            Builder { boxes, centroids: boxes.iter().map(|b| b.center()).collect(), params: base, split: params.split };
+        let bin = if prims.is_empty() { Vec::new() } else { b.subtree(&mut prims, 0, 0) };
+        let max_depth_seen = binary_depth(&bin);
         let sah_cost = binary_sah_cost(&bin, &base);
         let (nodes, leaves, root_leaf) = match bin.first() {
             None => (Vec::new(), Vec::new(), false),
@@ -403,7 +409,7 @@ impl Accel for Bvh {
         let stats = AccelStats {
             nodes: nodes.len(),
             leaves: leaves.len(),
-            max_depth: b.max_depth_seen,
+            max_depth: max_depth_seen,
             prim_refs: prims.len(),
             bytes: nodes.len() * std::mem::size_of::<Node4>() + leaves.len() * 8 + prims.len() * 4,
             sah_cost,
@@ -501,6 +507,23 @@ impl Accel for Bvh {
     fn stats(&self) -> AccelStats {
         self.stats
     }
+}
+
+/// Depth of the deepest leaf of the binary tree (the root has depth 0).
+fn binary_depth(bin: &[Node]) -> usize {
+    let mut max = 0;
+    let mut stack = vec![(0usize, 0usize)];
+    while let Some((i, d)) = stack.pop() {
+        if i >= bin.len() {
+            continue;
+        }
+        max = max.max(d);
+        if bin[i].count == 0 {
+            stack.push((i + 1, d + 1));
+            stack.push((bin[i].first as usize, d + 1));
+        }
+    }
+    max
 }
 
 /// SAH cost of the binary tree, relative to the root's area.
