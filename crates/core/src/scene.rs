@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::accel::Accel;
+use crate::accel::{Accel, BuildParams};
 use crate::camera::Camera;
 use crate::geometry::{Aabb, Ray, Transform};
 use crate::light::{AreaLight, AreaShape, Light};
@@ -191,7 +191,11 @@ impl<'s, A: Accel> World<'s, A> {
             })
             .collect();
         let boxes: Vec<Aabb> = scene.objects.iter().map(|o| scene.object_aabb(o)).collect();
-        let top = A::build(&boxes, params);
+        // One object per top-level leaf: each object's box is tested before its own structure
+        // is entered (objects are few; a wasted bottom-level entry costs far more).
+        let mut top_params = *params;
+        top_params.base_mut().max_leaf_prims = 1;
+        let top = A::build(&boxes, &top_params);
         let mut lights = scene.lights.clone();
         for (i, o) in scene.objects.iter().enumerate() {
             if o.emission != Rgb::ZERO && o.emission.is_finite() {

@@ -63,6 +63,9 @@ pub struct Bvh {
     prims: Vec<u32>,
     /// Whether the root is itself a leaf (then `leaves[0]` holds everything).
     root_leaf: bool,
+    /// Bounds of everything: tested first, so that a ray that misses a small mesh entirely
+    /// costs one box test (a 2-triangle quad has no node of its own to cull with).
+    root_box: Aabb,
     stats: AccelStats,
 }
 
@@ -414,10 +417,14 @@ impl Accel for Bvh {
             bytes: nodes.len() * std::mem::size_of::<Node4>() + leaves.len() * 8 + prims.len() * 4,
             sah_cost,
         };
-        Bvh { nodes, leaves, prims, root_leaf, stats }
+        let root_box = bin.first().map_or(Aabb::EMPTY, |n| n.aabb());
+        Bvh { nodes, leaves, prims, root_leaf, root_box, stats }
     }
 
     fn closest(&self, ray: &Ray, t_max: &mut f32, mut test: impl FnMut(u32, f32) -> Option<f32>) -> bool {
+        if self.root_box.slab(ray.o, ray.d.recip(), 0.0, *t_max).is_none() {
+            return false;
+        }
         let mut hit = false;
         if self.root_leaf {
             for &p in self.leaf(LEAF) {
@@ -469,6 +476,9 @@ impl Accel for Bvh {
     }
 
     fn any(&self, ray: &Ray, t_max: f32, mut test: impl FnMut(u32, f32) -> bool) -> bool {
+        if self.root_box.slab(ray.o, ray.d.recip(), 0.0, t_max).is_none() {
+            return false;
+        }
         if self.root_leaf {
             return self.leaf(LEAF).iter().any(|&p| test(p, t_max));
         }

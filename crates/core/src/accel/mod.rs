@@ -149,15 +149,22 @@ pub struct BvhParams {
 /// Build parameters that an accelerator type accepts.
 pub trait BuildParams: Sync + Send + Copy {
     fn base(&self) -> &AccelParams;
+    fn base_mut(&mut self) -> &mut AccelParams;
 }
 impl BuildParams for AccelParams {
     fn base(&self) -> &AccelParams {
+        self
+    }
+    fn base_mut(&mut self) -> &mut AccelParams {
         self
     }
 }
 impl BuildParams for BvhParams {
     fn base(&self) -> &AccelParams {
         &self.base
+    }
+    fn base_mut(&mut self) -> &mut AccelParams {
+        &mut self.base
     }
 }
 
