@@ -138,7 +138,7 @@ fn every_bvh_matches_brute_force_on_an_adversarial_scene() {
     for seed in [1, 2] {
         let scene = adversarial_scene(seed);
         let rays = rays(&scene, 3000, seed);
-        for split in [SplitMethod::Center, SplitMethod::Median, SplitMethod::Sah] {
+        for split in [SplitMethod::Center, SplitMethod::Median, SplitMethod::Sah, SplitMethod::Morton] {
             for max_leaf_prims in [1, 4] {
                 let params = BvhParams { split, base: AccelParams { max_leaf_prims, ..AccelParams::default() } };
                 check_against_brute::<Bvh>(&format!("{split:?}/{max_leaf_prims}"), &scene, &params, &rays);

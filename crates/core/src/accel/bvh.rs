@@ -22,6 +22,28 @@ pub enum SplitMethod {
     Median,
     /// Binned surface area heuristic (16 bins on each axis).
     Sah,
+    /// LBVH (Lauterbach et al. 2009, Karras 2012): primitives sorted once along a Morton
+    /// (Z-order) curve of their centres; each node splits where the highest differing bit of
+    /// the codes flips, so the hierarchy is the radix tree of the codes, built from the
+    /// sorted leaves without any cost evaluation.
+    Morton,
+}
+
+/// Spreads the low 10 bits of `v` to every third bit.
+fn spread_bits(v: u32) -> u32 {
+    let mut x = v & 0x3ff;
+    x = (x | (x << 16)) & 0x0300_00ff;
+    x = (x | (x << 8)) & 0x0300_f00f;
+    x = (x | (x << 4)) & 0x030c_30c3;
+    x = (x | (x << 2)) & 0x0924_9249;
+    x
+}
+
+/// 30-bit Morton code of `p` inside `b` (10 bits per axis).
+fn morton(p: glam::Vec3, b: &Aabb) -> u32 {
+    let e = b.extent().max(glam::Vec3::splat(f32::MIN_POSITIVE));
+    let q = ((p - b.min) / e * 1023.0).clamp(glam::Vec3::ZERO, glam::Vec3::splat(1023.0));
+    (spread_bits(q.x as u32) << 2) | (spread_bits(q.y as u32) << 1) | spread_bits(q.z as u32)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -82,6 +104,8 @@ struct Builder<'a> {
     centroids: Vec<glam::Vec3>,
     params: AccelParams,
     split: SplitMethod,
+    /// Morton code per primitive (only for [`SplitMethod::Morton`]).
+    codes: Vec<u32>,
 }
 
 /// Subtrees with more primitives than this are built as separate tasks.
@@ -132,6 +156,9 @@ impl Builder<'_> {
     /// Reorders `prims` and returns the split index, always in `1..n`.
     fn partition(&self, prims: &mut [u32], bounds: &Aabb, cbounds: &Aabb) -> usize {
         let n = prims.len();
+        if self.split == SplitMethod::Morton {
+            return self.morton_partition(prims);
+        }
         let axis = cbounds.largest_axis();
         let c = &self.centroids;
         if cbounds.extent()[axis] <= 0.0 {
@@ -145,12 +172,26 @@ impl Builder<'_> {
             }
             SplitMethod::Median => n / 2,
             SplitMethod::Sah => return self.sah_partition(prims, bounds, cbounds),
+            SplitMethod::Morton => unreachable!("handled above"),
         };
         if mid == 0 || mid == n || self.split == SplitMethod::Median {
             prims.select_nth_unstable_by(n / 2, |&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]));
             return n / 2;
         }
         mid
+    }
+
+    /// `prims` is sorted by Morton code: split where the highest bit in which the first and
+    /// last codes differ turns from 0 to 1 (in the middle if all codes are equal).
+    fn morton_partition(&self, prims: &[u32]) -> usize {
+        let n = prims.len();
+        let (first, last) = (self.codes[prims[0] as usize], self.codes[prims[n - 1] as usize]);
+        if first == last {
+            return n / 2;
+        }
+        let bit = 31 - (first ^ last).leading_zeros();
+        let mid = prims.partition_point(|&p| self.codes[p as usize] & (1 << bit) == 0);
+        mid.clamp(1, n - 1)
     }
 
     #[allow(clippy::needless_range_loop)]
@@ -396,8 +437,16 @@ impl Accel for Bvh {
         let mut base = params.base;
         base.max_depth = base.max_depth.min(MAX_STACK - 1);
         base.max_leaf_prims = base.max_leaf_prims.max(1);
-        let b =
-            Builder { boxes, centroids: boxes.iter().map(|b| b.center()).collect(), params: base, split: params.split };
+        let centroids: Vec<glam::Vec3> = boxes.iter().map(|b| b.center()).collect();
+        let codes = if params.split == SplitMethod::Morton {
+            let cb = prims.iter().fold(Aabb::EMPTY, |b, &p| b.grow(centroids[p as usize]));
+            let codes: Vec<u32> = centroids.iter().map(|c| morton(*c, &cb)).collect();
+            prims.sort_unstable_by_key(|&p| (codes[p as usize], p));
+            codes
+        } else {
+            Vec::new()
+        };
+        let b = Builder { boxes, centroids, params: base, split: params.split, codes };
         let bin = if prims.is_empty() { Vec::new() } else { b.subtree(&mut prims, 0, 0) };
         let max_depth_seen = binary_depth(&bin);
         let sah_cost = binary_sah_cost(&bin, &base);

@@ -89,11 +89,12 @@ pub enum AccelKind {
 
 impl AccelKind {
     /// Every kind, in the order tables list them.
-    pub const ALL: [AccelKind; 4] = [
+    pub const ALL: [AccelKind; 5] = [
         AccelKind::Brute,
         AccelKind::Bvh(SplitMethod::Center),
         AccelKind::Bvh(SplitMethod::Median),
         AccelKind::Bvh(SplitMethod::Sah),
+        AccelKind::Bvh(SplitMethod::Morton),
     ];
 
     /// What `default` means: the fastest implementation.
@@ -105,6 +106,7 @@ impl AccelKind {
             AccelKind::Bvh(SplitMethod::Center) => "bvh-center",
             AccelKind::Bvh(SplitMethod::Median) => "bvh-median",
             AccelKind::Bvh(SplitMethod::Sah) => "bvh-sah",
+            AccelKind::Bvh(SplitMethod::Morton) => "bvh-bottomup",
         }
     }
 
