@@ -2,7 +2,9 @@
 //! (meshes, instances with transforms, spheres), plus watertightness and instance boxes.
 
 use glam::{Affine3A, Quat, Vec3};
-use snell_core::accel::{Accel, AccelKind, AccelParams, AnyWorld, Brute, Bvh, BvhParams, SplitMethod};
+use snell_core::accel::{
+    Accel, AccelKind, AccelParams, AnyWorld, Brute, Bvh, BvhParams, Grid, GridParams, SplitMethod,
+};
 use snell_core::camera::{Camera, Projection};
 use snell_core::geometry::{Ray, Transform};
 use snell_core::material::Material;
@@ -148,6 +150,10 @@ fn every_bvh_matches_brute_force_on_an_adversarial_scene() {
         let params =
             BvhParams { split: SplitMethod::Sah, base: AccelParams { max_depth: 3, ..AccelParams::default() } };
         check_against_brute::<Bvh>("sah/depth3", &scene, &params, &rays);
+        for lambda in [0.5, 3.0, 12.0] {
+            let params = GridParams { base: AccelParams::default(), lambda };
+            check_against_brute::<Grid>(&format!("grid/{lambda}"), &scene, &params, &rays);
+        }
     }
 }
 
@@ -170,7 +176,7 @@ fn empty_and_single_primitive_scenes() {
         let w = kind.build_world(&scene, &AccelParams::default());
         let hit = snell_core::with_world!(&w, w => w.intersect(&r, f32::INFINITY));
         assert!((hit.unwrap().t - 1.0).abs() < 1e-6, "{kind}");
-        assert!(matches!(w, AnyWorld::Brute(_) | AnyWorld::Bvh(_)));
+        assert!(matches!(w, AnyWorld::Brute(_) | AnyWorld::Bvh(_) | AnyWorld::Grid(_)));
     }
 }
 

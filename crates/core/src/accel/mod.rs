@@ -13,12 +13,14 @@
 
 mod brute;
 mod bvh;
+mod grid;
 
 use std::fmt;
 use std::str::FromStr;
 
 pub use brute::Brute;
 pub use bvh::{Bvh, SplitMethod};
+pub use grid::{Grid, GridParams};
 
 use crate::geometry::{Aabb, Ray};
 use crate::scene::{Scene, World};
@@ -83,18 +85,21 @@ pub struct AccelStats {
 pub enum AccelKind {
     /// Tests every primitive: the correctness oracle.
     Brute,
-    /// Top-down BVH with the given split method.
+    /// BVH with the given split method.
     Bvh(SplitMethod),
+    /// Uniform grid.
+    Grid,
 }
 
 impl AccelKind {
     /// Every kind, in the order tables list them.
-    pub const ALL: [AccelKind; 5] = [
+    pub const ALL: [AccelKind; 6] = [
         AccelKind::Brute,
         AccelKind::Bvh(SplitMethod::Center),
         AccelKind::Bvh(SplitMethod::Median),
         AccelKind::Bvh(SplitMethod::Sah),
         AccelKind::Bvh(SplitMethod::Morton),
+        AccelKind::Grid,
     ];
 
     /// What `default` means: the fastest implementation.
@@ -107,6 +112,7 @@ impl AccelKind {
             AccelKind::Bvh(SplitMethod::Median) => "bvh-median",
             AccelKind::Bvh(SplitMethod::Sah) => "bvh-sah",
             AccelKind::Bvh(SplitMethod::Morton) => "bvh-bottomup",
+            AccelKind::Grid => "grid",
         }
     }
 
@@ -118,6 +124,7 @@ impl AccelKind {
                 let p = BvhParams { split, base: *params };
                 AnyWorld::Bvh(World::build(scene, &p))
             }
+            AccelKind::Grid => AnyWorld::Grid(World::build(scene, &GridParams { base: *params, lambda: 3.0 })),
         }
     }
 }
@@ -174,6 +181,7 @@ impl BuildParams for BvhParams {
 pub enum AnyWorld<'s> {
     Brute(World<'s, Brute>),
     Bvh(World<'s, Bvh>),
+    Grid(World<'s, Grid>),
 }
 
 /// Runs `$body` with `$w` bound to the concrete `World<A>` inside an [`AnyWorld`].
@@ -183,6 +191,7 @@ macro_rules! with_world {
         match $any {
             $crate::accel::AnyWorld::Brute($w) => $body,
             $crate::accel::AnyWorld::Bvh($w) => $body,
+            $crate::accel::AnyWorld::Grid($w) => $body,
         }
     };
 }
