@@ -64,7 +64,7 @@ struct RenderArgs {
     /// Prune branches whose accumulated weight falls below this.
     #[arg(long, value_parser = parse_attenuation)]
     min_attenuation: Option<f32>,
-    /// Acceleration structure: default, brute, bvh-center, bvh-median, bvh-sah.
+    /// Acceleration structure: default, brute, bvh-center, bvh-median, bvh-sah, bvh-bottomup, kdtree, grid.
     #[arg(long, value_parser = parse_accel)]
     accel: Option<AccelKind>,
 }

@@ -3,7 +3,7 @@
 
 use glam::{Affine3A, Quat, Vec3};
 use snell_core::accel::{
-    Accel, AccelKind, AccelParams, AnyWorld, Brute, Bvh, BvhParams, Grid, GridParams, SplitMethod,
+    Accel, AccelKind, AccelParams, AnyWorld, Brute, Bvh, BvhParams, Grid, GridParams, KdParams, KdTree, SplitMethod,
 };
 use snell_core::camera::{Camera, Projection};
 use snell_core::geometry::{Ray, Transform};
@@ -136,7 +136,7 @@ fn check_against_brute<A: Accel>(name: &str, scene: &Scene, params: &A::Params, 
 }
 
 #[test]
-fn every_bvh_matches_brute_force_on_an_adversarial_scene() {
+fn every_accelerator_matches_brute_force_on_an_adversarial_scene() {
     for seed in [1, 2] {
         let scene = adversarial_scene(seed);
         let rays = rays(&scene, 3000, seed);
@@ -150,6 +150,11 @@ fn every_bvh_matches_brute_force_on_an_adversarial_scene() {
         let params =
             BvhParams { split: SplitMethod::Sah, base: AccelParams { max_depth: 3, ..AccelParams::default() } };
         check_against_brute::<Bvh>("sah/depth3", &scene, &params, &rays);
+        for (leaf, bonus) in [(1, 0.5), (4, 0.5), (4, 0.0), (8, 0.9)] {
+            let base = AccelParams { max_leaf_prims: leaf, ..AccelParams::default() };
+            let params = KdParams { empty_bonus: bonus, ..KdParams::new(base) };
+            check_against_brute::<KdTree>(&format!("kdtree/{leaf}/{bonus}"), &scene, &params, &rays);
+        }
         for lambda in [0.5, 3.0, 12.0] {
             let params = GridParams { base: AccelParams::default(), lambda };
             check_against_brute::<Grid>(&format!("grid/{lambda}"), &scene, &params, &rays);
@@ -176,7 +181,7 @@ fn empty_and_single_primitive_scenes() {
         let w = kind.build_world(&scene, &AccelParams::default());
         let hit = snell_core::with_world!(&w, w => w.intersect(&r, f32::INFINITY));
         assert!((hit.unwrap().t - 1.0).abs() < 1e-6, "{kind}");
-        assert!(matches!(w, AnyWorld::Brute(_) | AnyWorld::Bvh(_) | AnyWorld::Grid(_)));
+        assert!(matches!(w, AnyWorld::Brute(_) | AnyWorld::Bvh(_) | AnyWorld::KdTree(_) | AnyWorld::Grid(_)));
     }
 }
 

@@ -14,6 +14,7 @@
 mod brute;
 mod bvh;
 mod grid;
+mod kdtree;
 
 use std::fmt;
 use std::str::FromStr;
@@ -21,6 +22,7 @@ use std::str::FromStr;
 pub use brute::Brute;
 pub use bvh::{Bvh, SplitMethod};
 pub use grid::{Grid, GridParams};
+pub use kdtree::{KdParams, KdTree};
 
 use crate::geometry::{Aabb, Ray};
 use crate::scene::{Scene, World};
@@ -87,18 +89,21 @@ pub enum AccelKind {
     Brute,
     /// BVH with the given split method.
     Bvh(SplitMethod),
+    /// SAH k-d tree.
+    KdTree,
     /// Uniform grid.
     Grid,
 }
 
 impl AccelKind {
     /// Every kind, in the order tables list them.
-    pub const ALL: [AccelKind; 6] = [
+    pub const ALL: [AccelKind; 7] = [
         AccelKind::Brute,
         AccelKind::Bvh(SplitMethod::Center),
         AccelKind::Bvh(SplitMethod::Median),
         AccelKind::Bvh(SplitMethod::Sah),
         AccelKind::Bvh(SplitMethod::Morton),
+        AccelKind::KdTree,
         AccelKind::Grid,
     ];
 
@@ -112,6 +117,7 @@ impl AccelKind {
             AccelKind::Bvh(SplitMethod::Median) => "bvh-median",
             AccelKind::Bvh(SplitMethod::Sah) => "bvh-sah",
             AccelKind::Bvh(SplitMethod::Morton) => "bvh-bottomup",
+            AccelKind::KdTree => "kdtree",
             AccelKind::Grid => "grid",
         }
     }
@@ -124,6 +130,7 @@ impl AccelKind {
                 let p = BvhParams { split, base: *params };
                 AnyWorld::Bvh(World::build(scene, &p))
             }
+            AccelKind::KdTree => AnyWorld::KdTree(World::build(scene, &KdParams::new(*params))),
             AccelKind::Grid => AnyWorld::Grid(World::build(scene, &GridParams { base: *params, lambda: 3.0 })),
         }
     }
@@ -181,6 +188,7 @@ impl BuildParams for BvhParams {
 pub enum AnyWorld<'s> {
     Brute(World<'s, Brute>),
     Bvh(World<'s, Bvh>),
+    KdTree(World<'s, KdTree>),
     Grid(World<'s, Grid>),
 }
 
@@ -191,6 +199,7 @@ macro_rules! with_world {
         match $any {
             $crate::accel::AnyWorld::Brute($w) => $body,
             $crate::accel::AnyWorld::Bvh($w) => $body,
+            $crate::accel::AnyWorld::KdTree($w) => $body,
             $crate::accel::AnyWorld::Grid($w) => $body,
         }
     };
