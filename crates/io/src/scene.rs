@@ -283,7 +283,20 @@ struct ShapeDef {
     smooth: S<bool>,
     positions: S<Vec<V3>>,
     indices: S<Vec<[i64; 3]>>,
+    // instancing
+    array: S<ArrayDef>,
 }
+
+/// `array = { count = [nx, ny, nz], step = [dx, dy, dz] }`: the shape repeated on a lattice.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ArrayDef {
+    count: [u32; 3],
+    step: V3,
+}
+
+/// Most copies one `array` may make.
+const MAX_ARRAY: u64 = 1 << 20;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -404,7 +417,11 @@ pub fn parse(src: &str, path: &Path) -> Result<LoadedScene, Error> {
     let mut mesh_cache: HashMap<(PathBuf, bool), usize> = HashMap::new();
     let mut objects = Vec::new();
     for s in &file.shapes {
-        objects.push(shape_def(&cx, s, &base_dir, &material_ids, &mut geometries, &mut mesh_cache)?);
+        let object = shape_def(&cx, s, &base_dir, &material_ids, &mut geometries, &mut mesh_cache)?;
+        match &s.get_ref().array {
+            None => objects.push(object),
+            Some(a) => objects.extend(array_copies(&cx, &object, a)?),
+        }
     }
 
     let mut scene = Scene {
@@ -812,6 +829,29 @@ fn shape_def(
         }
     }
     Ok(Object { geometry, transform, material, emission, light_samples })
+}
+
+/// The copies an `array` makes of `object`: each an instance of the same geometry, translated
+/// by `step · (i, j, k)` after the object's own transform.
+fn array_copies(cx: &Ctx, object: &Object, a: &Spanned<ArrayDef>) -> Result<Vec<Object>, Error> {
+    let ArrayDef { count, step } = a.get_ref();
+    let total = count.iter().map(|&c| c as u64).product::<u64>();
+    if total == 0 || total > MAX_ARRAY {
+        return Err(cx.err(a.span(), format!("an array makes between 1 and {MAX_ARRAY} copies, not {total}")));
+    }
+    let base = object.transform.map_or(Affine3A::IDENTITY, |t| t.m);
+    let mut out = Vec::with_capacity(total as usize);
+    for k in 0..count[2] {
+        for j in 0..count[1] {
+            for i in 0..count[0] {
+                let offset = step.0 * Vec3::new(i as f32, j as f32, k as f32);
+                let t = Transform::try_new(Affine3A::from_translation(offset) * base)
+                    .ok_or_else(|| cx.err(a.span(), "an array copy's transform is not finite"))?;
+                out.push(Object { transform: (!t.is_identity()).then_some(t), ..object.clone() });
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// A camera looking at the box `b` from the front, a little from above and the right.

@@ -211,3 +211,13 @@ fn unwritable_output_fails_before_rendering() {
     assert!(stderr(&o).contains("out.jpg") && stderr(&o).contains(".png or .exr"));
     assert!(!Path::new(&dir.path().join("out.jpg")).exists());
 }
+
+#[test]
+fn bad_arrays() {
+    let scene = b"[[shapes]]\ntype = \"sphere\"\narray = { count = [0, 1, 1], step = [1, 0, 0] }\n";
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:9", "copies"]);
+    let scene = b"[[shapes]]\ntype = \"sphere\"\narray = { count = [2000, 2000, 1], step = [1, 0, 0] }\n";
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:9", "copies"]);
+    let scene = b"[[shapes]]\ntype = \"sphere\"\narray = { count = [2, 2], step = [1, 0, 0] }\n";
+    fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:"]);
+}

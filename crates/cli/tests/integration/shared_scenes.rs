@@ -101,3 +101,42 @@ fn bunny_renders_as_a_bare_mesh() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(dir.path().join("bunny.png").is_file());
 }
+
+#[test]
+fn a_thousand_instanced_bunnies_share_one_mesh() {
+    let Some(bunny) = shared_scene("stanford/bunny.ply") else { return };
+    let src = format!(
+        "[render]\nbackground = 0.5\n[[lights]]\ntype = \"directional\"\ndirection = [0, -1, 0]\n[[shapes]]\ntype = \"mesh\"\nfile = {:?}\ntransform = [{{ rotate = {{ axis = [0, 1, 0], angle = 30 }} }}]\narray = {{ count = [10, 10, 10], step = [0.2, 0.2, 0.2] }}\n",
+        bunny.to_str().unwrap()
+    );
+    let l = snell_io::scene::parse(&src, std::path::Path::new("instances.toml")).unwrap();
+    assert_eq!(l.scene.geometries.len(), 1, "the mesh must be stored once");
+    assert_eq!(l.scene.objects.len(), 1000);
+    assert_eq!(l.scene.triangle_count(), 1000 * 69_451);
+    // Every instance is boxed by its own transformed corners, and renders.
+    let b0 = l.scene.object_aabb(&l.scene.objects[0]);
+    let b999 = l.scene.object_aabb(&l.scene.objects[999]);
+    assert!(((b999.min - b0.min) - Vec3::splat(1.8)).abs().max_element() < 1e-4);
+    let o = crate::images::Opts { width: 24, height: 24, spp: 1, ..Default::default() };
+    let (img, stats) = crate::images::render_loaded(&l, &o);
+    // Some pixels show the background, some show lit bunnies.
+    assert!(img.pixels.iter().any(|p| (p.x - 0.5).abs() < 1e-6));
+    assert!(img.pixels.iter().any(|p| (p.x - 0.5).abs() > 1e-3));
+    assert_eq!(stats.camera, 24 * 24);
+}
+
+#[test]
+fn the_bunnies_example_scene_loads() {
+    if shared_scene("stanford/bunny.ply").is_none() {
+        return;
+    }
+    // scenes/bunnies.toml reads the bunny from ../shared beside the checkout.
+    let p = crate::common::repo_scene("bunnies.toml");
+    if std::fs::metadata(p.parent().unwrap().join("../../shared/scenes/stanford/bunny.ply")).is_err() {
+        eprintln!("../shared is not beside this checkout: skipping scenes/bunnies.toml");
+        return;
+    }
+    let l = snell_io::scene::load(&p).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(l.scene.objects.len(), 1001);
+    assert_eq!(l.scene.geometries.len(), 2);
+}
