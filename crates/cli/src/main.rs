@@ -67,6 +67,13 @@ struct RenderArgs {
     /// Acceleration structure: default, brute, bvh-center, bvh-median, bvh-sah, bvh-bottomup, kdtree, grid.
     #[arg(long, value_parser = parse_accel)]
     accel: Option<AccelKind>,
+    /// Instead of shading, `heatmap`: one ray per pixel centre, coloured by the nodes it visits
+    /// (written to OUT) and the primitives it tests (written to OUT with `-prims` added).
+    #[arg(long, value_parser = ["heatmap"])]
+    aov: Option<String>,
+    /// Draw the boxes of the acceleration structure at this depth (0 = the root) over the image.
+    #[arg(long, value_name = "DEPTH", value_parser = clap::value_parser!(u32).range(0..=64))]
+    show_boxes: Option<u32>,
 }
 
 fn parse_attenuation(s: &str) -> Result<f32, String> {
@@ -140,6 +147,31 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     let world = accel.build_world(&scene, &AccelParams::default());
     let build_s = t_build.elapsed().as_secs_f64();
 
+    let boxes = args.show_boxes.map(|d| with_world!(&world, w => snell_core::inspect::boxes_at_depth(w, d as usize)));
+    let overlay = |img: &mut snell_core::image::Image| {
+        if let Some(b) = &boxes {
+            snell_core::inspect::draw_boxes(img, &scene.camera, b, snell_core::Rgb::new(0.1, 1.0, 0.25));
+        }
+    };
+    if args.aov.as_deref() == Some("heatmap") {
+        let t0 = Instant::now();
+        let hm = with_world!(&world, w => snell_core::inspect::heat_map(w, &settings));
+        let secs = t0.elapsed().as_secs_f64();
+        let prims_path = suffixed(&args.output, "-prims");
+        for (values, path, what) in
+            [(&hm.nodes, &args.output, "nodes visited"), (&hm.prims, &prims_path, "primitives tested")]
+        {
+            let max = values.iter().copied().max().unwrap_or(0);
+            let mean = values.iter().map(|&v| v as f64).sum::<f64>() / values.len().max(1) as f64;
+            let mut img = snell_core::inspect::colourize(hm.width, hm.height, values, max);
+            overlay(&mut img);
+            snell_io::image_out::write_image(path, &img).with_context(|| format!("writing {}", path.display()))?;
+            println!("{}: {what} per camera ray, black = 0 .. pale yellow = {max} (mean {mean:.1})", path.display());
+        }
+        println!("heat map with {accel}: {}x{} rays in {secs:.2} s", settings.width, settings.height);
+        return Ok(());
+    }
+
     let pixels = settings.width as u64 * settings.height as u64;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(Some(pixels), ProgressDrawTarget::stderr())
@@ -152,7 +184,8 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     );
     let progress = |n: u64| bar.inc(n);
     let t_render = Instant::now();
-    let (image, stats) = with_world!(&world, w => render(w, &integrator, &settings, &progress));
+    let (mut image, stats) = with_world!(&world, w => render(w, &integrator, &settings, &progress));
+    overlay(&mut image);
     let render_s = t_render.elapsed().as_secs_f64();
     bar.finish_and_clear();
 
@@ -173,6 +206,16 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         stats.total_rays() as f64 / render_s.max(1e-9) / 1e6
     );
     Ok(())
+}
+
+/// `dir/name.ext` → `dir/name{suffix}.ext`.
+fn suffixed(p: &Path, suffix: &str) -> PathBuf {
+    let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = match p.extension() {
+        Some(e) => format!("{stem}{suffix}.{}", e.to_string_lossy()),
+        None => format!("{stem}{suffix}"),
+    };
+    p.with_file_name(name)
 }
 
 fn print_stats(s: &RayStats) {

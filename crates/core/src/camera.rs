@@ -42,6 +42,11 @@ impl Camera {
         self.forward
     }
 
+    /// The orthonormal frame: right, up, forward.
+    pub fn frame(&self) -> (Vec3, Vec3, Vec3) {
+        (self.right, self.up, self.forward)
+    }
+
     /// The ray through film position `film` (in pixels, origin top left, y down) of a
     /// `width × height` image; `lens` is a uniform sample for the aperture.
     pub fn ray(&self, film: Vec2, width: u32, height: u32, lens: Vec2) -> Ray {

@@ -20,6 +20,7 @@ pub mod camera;
 pub mod filter;
 pub mod geometry;
 pub mod image;
+pub mod inspect;
 pub mod integrator;
 pub mod light;
 pub mod material;

@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::accel::{Accel, BuildParams};
+use crate::accel::{Accel, BuildParams, Counter, NoCount};
 use crate::camera::Camera;
 use crate::geometry::{Aabb, Ray, Transform};
 use crate::light::{AreaLight, AreaShape, Light};
@@ -217,40 +217,58 @@ impl<'s, A: Accel> World<'s, A> {
     }
 
     /// Closest hit with `0 < t < t_max`: only which primitive and where on it.
+    #[inline]
     pub fn hit(&self, ray: &Ray, t_max: f32) -> Option<RawHit> {
+        self.hit_counted(ray, t_max, &NoCount)
+    }
+
+    /// [`World::hit`], reporting the nodes visited and primitives tested at both levels.
+    pub fn hit_counted(&self, ray: &Ray, t_max: f32, counter: &impl Counter) -> Option<RawHit> {
         // (object, primitive, b1, b2)
         let mut best: Option<(u32, u32, f32, f32)> = None;
         let mut t = t_max;
-        self.top.closest(ray, &mut t, |obj, tmax| {
-            let o = &self.scene.objects[obj as usize];
-            let local = match &o.transform {
-                Some(x) => x.ray_to_object(ray),
-                None => *ray,
-            };
-            match &self.scene.geometries[o.geometry] {
-                Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
-                    best = Some((obj, 0, 0.0, 0.0));
-                }),
-                Geometry::Mesh(_) => {
-                    let accel = self.blas[o.geometry].as_ref()?;
-                    let tris = &self.tris[o.geometry];
-                    let wr = WatertightRay::new(local.o, local.d);
-                    let mut tm = tmax;
-                    let mut rec = None;
-                    accel.closest(&local, &mut tm, |tri, tmx| {
-                        let [a, b, c] = tris[tri as usize];
-                        intersect_triangle(&wr, a, b, c, tmx).map(|h| {
-                            rec = Some((tri, h.b1, h.b2));
-                            h.t
+        self.top.closest_counted(
+            ray,
+            &mut t,
+            |obj, tmax| {
+                counter.prim();
+                let o = &self.scene.objects[obj as usize];
+                let local = match &o.transform {
+                    Some(x) => x.ray_to_object(ray),
+                    None => *ray,
+                };
+                match &self.scene.geometries[o.geometry] {
+                    Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
+                        best = Some((obj, 0, 0.0, 0.0));
+                    }),
+                    Geometry::Mesh(_) => {
+                        let accel = self.blas[o.geometry].as_ref()?;
+                        let tris = &self.tris[o.geometry];
+                        let wr = WatertightRay::new(local.o, local.d);
+                        let mut tm = tmax;
+                        let mut rec = None;
+                        accel.closest_counted(
+                            &local,
+                            &mut tm,
+                            |tri, tmx| {
+                                counter.prim();
+                                let [a, b, c] = tris[tri as usize];
+                                intersect_triangle(&wr, a, b, c, tmx).map(|h| {
+                                    rec = Some((tri, h.b1, h.b2));
+                                    h.t
+                                })
+                            },
+                            counter,
+                        );
+                        rec.map(|(tri, b1, b2)| {
+                            best = Some((obj, tri, b1, b2));
+                            tm
                         })
-                    });
-                    rec.map(|(tri, b1, b2)| {
-                        best = Some((obj, tri, b1, b2));
-                        tm
-                    })
+                    }
                 }
-            }
-        });
+            },
+            counter,
+        );
         let (object, prim, b1, b2) = best?;
         Some(RawHit { t, object, prim, b1, b2 })
     }

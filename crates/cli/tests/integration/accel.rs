@@ -344,3 +344,42 @@ fn instance_boxes_contain_every_transformed_vertex() {
         assert_eq!(b, snell_core::geometry::Aabb::from_points(g.corners().map(|c| t.point(c))));
     }
 }
+
+#[test]
+fn traversal_counts_and_structure_boxes() {
+    let scene = adversarial_scene(5);
+    let r = Ray::new(Vec3::new(-8.0, 0.1, 0.2), Vec3::X);
+    // The oracle tests every object and every triangle of every mesh it enters.
+    let brute: World<Brute> = World::build(&scene, &AccelParams::default());
+    let c = snell_core::accel::Counts::default();
+    brute.hit_counted(&r, f32::INFINITY, &c);
+    let tris: u64 = scene
+        .objects
+        .iter()
+        .map(|o| match &scene.geometries[o.geometry] {
+            Geometry::Mesh(m) => m.indices.len() as u64,
+            Geometry::Sphere(_) => 0,
+        })
+        .sum();
+    assert_eq!(c.prims.get(), scene.objects.len() as u64 + tris);
+    for kind in AccelKind::ALL {
+        let w = kind.build_world(&scene, &AccelParams::default());
+        snell_core::with_world!(&w, w => {
+            let c = snell_core::accel::Counts::default();
+            let h = w.hit_counted(&r, f32::INFINITY, &c);
+            assert_eq!(h.map(|h| h.t), brute.hit(&r, f32::INFINITY).map(|h| h.t), "{kind}");
+            assert!(c.nodes.get() >= 1 && c.prims.get() >= 1, "{kind}: {c:?}");
+            if kind != AccelKind::Brute {
+                assert!(c.prims.get() < scene.objects.len() as u64 + tris, "{kind} tested everything");
+            }
+            // Boxes at depth 0 bound everything; deeper boxes lie inside them.
+            let root = snell_core::inspect::boxes_at_depth(w, 0);
+            let deeper = snell_core::inspect::boxes_at_depth(w, 2);
+            let all = root.iter().fold(snell_core::geometry::Aabb::EMPTY, |a, b| a.union(*b));
+            assert!(!root.is_empty(), "{kind}");
+            for b in &deeper {
+                assert!(all.contains(b.min) && all.contains(b.max), "{kind}: {b:?} outside {all:?}");
+            }
+        });
+    }
+}

@@ -286,3 +286,44 @@ fn golden_images_of_the_example_scenes() {
         check_golden(name, &img);
     }
 }
+
+#[test]
+fn heat_map_and_box_overlay_from_the_cli() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = crate::common::data("two-tetra.obj");
+    let o = run(
+        &["render", obj.to_str().unwrap(), "--aov", "heatmap", "-o", "hm.exr", "--width", "32", "--height", "24"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("nodes visited per camera ray") && out.contains("primitives tested per camera ray"), "{out}");
+    assert!(dir.path().join("hm.exr").is_file() && dir.path().join("hm-prims.exr").is_file());
+    let a = run(
+        &["render", obj.to_str().unwrap(), "-o", "a.png", "--width", "32", "--height", "24", "--spp", "1"],
+        dir.path(),
+    );
+    let b = run(
+        &[
+            "render",
+            obj.to_str().unwrap(),
+            "-o",
+            "b.png",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--spp",
+            "1",
+            "--show-boxes",
+            "1",
+        ],
+        dir.path(),
+    );
+    assert!(a.status.success() && b.status.success());
+    let (a, b) = (image::open(dir.path().join("a.png")).unwrap(), image::open(dir.path().join("b.png")).unwrap());
+    let differ = a.to_rgb8().pixels().zip(b.to_rgb8().pixels()).filter(|(p, q)| p != q).count();
+    assert!(differ > 20, "the boxes were not drawn ({differ} pixels differ)");
+    let bad = run(&["render", "--aov", "normals"], dir.path());
+    assert_eq!(bad.status.code(), Some(2));
+}

@@ -1,4 +1,4 @@
-use super::{Accel, AccelParams, AccelStats};
+use super::{Accel, AccelParams, AccelStats, Counter};
 use crate::geometry::{Aabb, Ray};
 
 /// The brute-force list: every non-empty primitive is tested for every ray. It is the oracle
@@ -6,11 +6,14 @@ use crate::geometry::{Aabb, Ray};
 /// even a box test before the primitive test).
 pub struct Brute {
     prims: Vec<u32>,
+    bounds: Aabb,
 }
 
 impl Brute {
     pub fn new(boxes: &[Aabb]) -> Brute {
-        Brute { prims: (0..boxes.len() as u32).filter(|&i| !boxes[i as usize].is_empty()).collect() }
+        let prims: Vec<u32> = (0..boxes.len() as u32).filter(|&i| !boxes[i as usize].is_empty()).collect();
+        let bounds = prims.iter().fold(Aabb::EMPTY, |b, &p| b.union(boxes[p as usize]));
+        Brute { prims, bounds }
     }
 }
 
@@ -21,7 +24,14 @@ impl Accel for Brute {
         Brute::new(boxes)
     }
 
-    fn closest(&self, _ray: &Ray, t_max: &mut f32, mut test: impl FnMut(u32, f32) -> Option<f32>) -> bool {
+    fn closest_counted(
+        &self,
+        _ray: &Ray,
+        t_max: &mut f32,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        counter.node();
         let mut hit = false;
         for &p in &self.prims {
             if let Some(t) = test(p, *t_max) {
@@ -32,8 +42,23 @@ impl Accel for Brute {
         hit
     }
 
-    fn any(&self, _ray: &Ray, t_max: f32, mut test: impl FnMut(u32, f32) -> bool) -> bool {
+    fn any_counted(
+        &self,
+        _ray: &Ray,
+        t_max: f32,
+        mut test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
+        counter.node();
         self.prims.iter().any(|&p| test(p, t_max))
+    }
+
+    fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {
+        if depth == 0 && !self.bounds.is_empty() {
+            vec![self.bounds]
+        } else {
+            Vec::new()
+        }
     }
 
     fn stats(&self) -> AccelStats {

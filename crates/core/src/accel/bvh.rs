@@ -10,7 +10,7 @@
 //! children in structure-of-arrays form, so that one SSE slab test checks all four. Traversal
 //! visits the children nearest first and skips stacked nodes that lie beyond the closest hit.
 
-use super::{Accel, AccelParams, AccelStats, BvhParams};
+use super::{Accel, AccelParams, AccelStats, BvhParams, Counter};
 use crate::geometry::{Aabb, Ray};
 
 /// How a node's primitives are divided between its two children.
@@ -470,7 +470,13 @@ impl Accel for Bvh {
         Bvh { nodes, leaves, prims, root_leaf, root_box, stats }
     }
 
-    fn closest(&self, ray: &Ray, t_max: &mut f32, mut test: impl FnMut(u32, f32) -> Option<f32>) -> bool {
+    fn closest_counted(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
         if self.root_box.slab(ray.o, ray.d.recip(), 0.0, *t_max).is_none() {
             return false;
         }
@@ -510,6 +516,7 @@ impl Accel for Bvh {
                     }
                     break;
                 }
+                counter.node();
                 let (k, refs, ts) = Self::hits(&self.nodes[cur as usize], &r, *t_max);
                 if k == 0 {
                     break;
@@ -524,7 +531,13 @@ impl Accel for Bvh {
         hit
     }
 
-    fn any(&self, ray: &Ray, t_max: f32, mut test: impl FnMut(u32, f32) -> bool) -> bool {
+    fn any_counted(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        mut test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
         if self.root_box.slab(ray.o, ray.d.recip(), 0.0, t_max).is_none() {
             return false;
         }
@@ -549,6 +562,7 @@ impl Accel for Bvh {
                     }
                     break;
                 }
+                counter.node();
                 let (k, refs, _) = Self::hits(&self.nodes[cur as usize], &r, t_max);
                 if k == 0 {
                     break;
@@ -561,6 +575,36 @@ impl Accel for Bvh {
             }
         }
         false
+    }
+
+    fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {
+        // Depth 0 is the root box; depth d the children of the 4-wide nodes at depth d - 1.
+        if self.root_box.is_empty() {
+            return Vec::new();
+        }
+        if depth == 0 {
+            return vec![self.root_box];
+        }
+        let mut out = Vec::new();
+        let mut todo = if self.nodes.is_empty() { Vec::new() } else { vec![(0usize, 1usize)] };
+        while let Some((i, d)) = todo.pop() {
+            let n = &self.nodes[i];
+            for j in 0..4 {
+                if n.child[j] == EMPTY {
+                    continue;
+                }
+                if d == depth {
+                    let b = &n.bounds;
+                    out.push(Aabb {
+                        min: glam::Vec3::new(b[0][j], b[1][j], b[2][j]),
+                        max: glam::Vec3::new(b[3][j], b[4][j], b[5][j]),
+                    });
+                } else if n.child[j] & LEAF == 0 {
+                    todo.push((n.child[j] as usize, d + 1));
+                }
+            }
+        }
+        out
     }
 
     fn stats(&self) -> AccelStats {

@@ -13,7 +13,7 @@
 
 use glam::Vec3;
 
-use super::{Accel, AccelParams, AccelStats, BuildParams};
+use super::{Accel, AccelParams, AccelStats, BuildParams, Counter};
 use crate::geometry::{Aabb, Ray};
 
 /// Grid build settings.
@@ -65,7 +65,7 @@ impl Grid {
     /// Walks the cells the ray pierces within `[0, t_max]`, nearest first. `visit(cell, t_exit)`
     /// returns false to stop.
     #[inline]
-    fn walk(&self, ray: &Ray, t_max: f32, mut visit: impl FnMut(usize, f32) -> bool) {
+    fn walk(&self, ray: &Ray, t_max: f32, counter: &impl Counter, mut visit: impl FnMut(usize, f32) -> bool) {
         if self.cell_prims.is_empty() {
             return;
         }
@@ -107,6 +107,7 @@ impl Grid {
                 2
             };
             let t_exit = next[a];
+            counter.node();
             if !visit(self.cell_index(cell), t_exit) {
                 return;
             }
@@ -203,12 +204,18 @@ impl Accel for Grid {
         grid
     }
 
-    fn closest(&self, ray: &Ray, t_max: &mut f32, mut test: impl FnMut(u32, f32) -> Option<f32>) -> bool {
+    fn closest_counted(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
         let mut mailbox = [u32::MAX; MAILBOX];
         let mut hit = false;
         let limit = *t_max;
         let mut best = limit;
-        self.walk(ray, limit, |cell, t_exit| {
+        self.walk(ray, limit, counter, |cell, t_exit| {
             for &p in self.prims_in(cell) {
                 let slot = &mut mailbox[p as usize % MAILBOX];
                 if *slot == p {
@@ -227,10 +234,16 @@ impl Accel for Grid {
         hit
     }
 
-    fn any(&self, ray: &Ray, t_max: f32, mut test: impl FnMut(u32, f32) -> bool) -> bool {
+    fn any_counted(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        mut test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
         let mut mailbox = [u32::MAX; MAILBOX];
         let mut hit = false;
-        self.walk(ray, t_max, |cell, _| {
+        self.walk(ray, t_max, counter, |cell, _| {
             for &p in self.prims_in(cell) {
                 let slot = &mut mailbox[p as usize % MAILBOX];
                 if *slot == p {
@@ -245,6 +258,29 @@ impl Accel for Grid {
             true
         });
         hit
+    }
+
+    fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {
+        // Depth 0: the grid's box; deeper: its non-empty cells.
+        if self.cell_prims.is_empty() {
+            return Vec::new();
+        }
+        if depth == 0 {
+            return vec![self.bounds];
+        }
+        let mut out = Vec::new();
+        for z in 0..self.res[2] as i32 {
+            for y in 0..self.res[1] as i32 {
+                for x in 0..self.res[0] as i32 {
+                    let c = self.cell_index([x, y, z]);
+                    if self.cell_start[c + 1] > self.cell_start[c] {
+                        let min = self.bounds.min + self.cell_size * Vec3::new(x as f32, y as f32, z as f32);
+                        out.push(Aabb { min, max: min + self.cell_size });
+                    }
+                }
+            }
+        }
+        out
     }
 
     fn stats(&self) -> AccelStats {

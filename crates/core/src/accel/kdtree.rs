@@ -11,7 +11,7 @@
 //! Primitives listed in several leaves are tested once per ray (64-entry mailbox, as in
 //! [`super::Grid`]).
 
-use super::{Accel, AccelParams, AccelStats, BuildParams};
+use super::{Accel, AccelParams, AccelStats, BuildParams, Counter};
 use crate::geometry::{Aabb, Ray};
 
 /// k-d tree build settings.
@@ -157,7 +157,7 @@ impl Builder<'_> {
 impl KdTree {
     /// Visits leaves in front-to-back order; `visit(prims, t_exit)` returns false to stop.
     #[inline]
-    fn walk(&self, ray: &Ray, t_max: f32, mut visit: impl FnMut(&[u32], f32) -> bool) {
+    fn walk(&self, ray: &Ray, t_max: f32, counter: &impl Counter, mut visit: impl FnMut(&[u32], f32) -> bool) {
         if self.nodes.is_empty() {
             return;
         }
@@ -168,6 +168,7 @@ impl KdTree {
         let mut sp = 0;
         let (mut node, mut tmin, mut tmax) = (0usize, t0, t1);
         loop {
+            counter.node();
             let n = &self.nodes[node];
             if n.axis == LEAF {
                 let prims = &self.refs[n.a as usize..(n.a + n.b) as usize];
@@ -246,11 +247,17 @@ impl Accel for KdTree {
         KdTree { bounds, nodes: b.nodes, refs: b.refs, stats }
     }
 
-    fn closest(&self, ray: &Ray, t_max: &mut f32, mut test: impl FnMut(u32, f32) -> Option<f32>) -> bool {
+    fn closest_counted(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
         let mut mailbox = [u32::MAX; MAILBOX];
         let mut best = *t_max;
         let mut hit = false;
-        self.walk(ray, *t_max, |prims, t_exit| {
+        self.walk(ray, *t_max, counter, |prims, t_exit| {
             for &p in prims {
                 let slot = &mut mailbox[p as usize % MAILBOX];
                 if *slot == p {
@@ -269,10 +276,16 @@ impl Accel for KdTree {
         hit
     }
 
-    fn any(&self, ray: &Ray, t_max: f32, mut test: impl FnMut(u32, f32) -> bool) -> bool {
+    fn any_counted(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        mut test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
         let mut mailbox = [u32::MAX; MAILBOX];
         let mut hit = false;
-        self.walk(ray, t_max, |prims, _| {
+        self.walk(ray, t_max, counter, |prims, _| {
             for &p in prims {
                 let slot = &mut mailbox[p as usize % MAILBOX];
                 if *slot == p {
@@ -287,6 +300,27 @@ impl Accel for KdTree {
             true
         });
         hit
+    }
+
+    fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {
+        let mut out = Vec::new();
+        let mut todo = if self.nodes.is_empty() { Vec::new() } else { vec![(0usize, self.bounds, 0usize)] };
+        while let Some((i, b, d)) = todo.pop() {
+            if d == depth {
+                out.push(b);
+                continue;
+            }
+            let n = &self.nodes[i];
+            if n.axis != LEAF {
+                let a = n.axis as usize;
+                let (mut lo, mut hi) = (b, b);
+                lo.max[a] = n.split;
+                hi.min[a] = n.split;
+                todo.push((i + 1, lo, d + 1));
+                todo.push((n.a as usize, hi, d + 1));
+            }
+        }
+        out
     }
 
     fn stats(&self) -> AccelStats {

@@ -39,13 +39,75 @@ pub trait Accel: Send + Sync + Sized {
     /// Closest-hit query. Calls `test(prim, t_max)` for candidate primitives; `test` returns
     /// `Some(t)` for a hit with `t < t_max` (and records what it needs), after which only
     /// closer hits are sought. `t_max` is updated in place; returns whether anything was hit.
-    fn closest(&self, ray: &Ray, t_max: &mut f32, test: impl FnMut(u32, f32) -> Option<f32>) -> bool;
+    #[inline]
+    fn closest(&self, ray: &Ray, t_max: &mut f32, test: impl FnMut(u32, f32) -> Option<f32>) -> bool {
+        self.closest_counted(ray, t_max, test, &NoCount)
+    }
 
     /// Any-hit query: stops at the first primitive for which `test(prim, t_max)` is true.
-    fn any(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool;
+    #[inline]
+    fn any(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
+        self.any_counted(ray, t_max, test, &NoCount)
+    }
+
+    /// [`Accel::closest`], reporting every node (or cell) visited to `counter`.
+    fn closest_counted(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool;
+
+    /// [`Accel::any`], reporting every node (or cell) visited to `counter`.
+    fn any_counted(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool, counter: &impl Counter) -> bool;
 
     /// Size and shape of the structure.
     fn stats(&self) -> AccelStats;
+
+    /// The boxes of the structure's nodes at `depth` (0 = the root), for pictures of it.
+    fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb>;
+}
+
+/// Receives traversal events. [`NoCount`] compiles to nothing; [`Counts`] tallies them (for
+/// the heat-map images and statistics).
+/// Shared (`&self`) so that one counter can follow a query into the bottom level from inside
+/// the top level's primitive test.
+pub trait Counter {
+    /// A node (or grid cell) was visited.
+    fn node(&self);
+    /// A primitive was tested.
+    fn prim(&self);
+}
+
+/// The counter of the normal render path: does nothing.
+pub struct NoCount;
+
+impl Counter for NoCount {
+    #[inline(always)]
+    fn node(&self) {}
+    #[inline(always)]
+    fn prim(&self) {}
+}
+
+/// Counts of traversal work for one query or many.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Counts {
+    /// Nodes (or grid cells) visited.
+    pub nodes: std::cell::Cell<u64>,
+    /// Primitives tested (objects in the top level, triangles and spheres below).
+    pub prims: std::cell::Cell<u64>,
+}
+
+impl Counter for Counts {
+    #[inline]
+    fn node(&self) {
+        self.nodes.set(self.nodes.get() + 1);
+    }
+    #[inline]
+    fn prim(&self) {
+        self.prims.set(self.prims.get() + 1);
+    }
 }
 
 /// Build settings shared by the accelerators (each uses those that apply to it).
