@@ -130,6 +130,37 @@ impl Scene {
     }
 }
 
+/// The boxes of the parts of triangle `t` inside `part` below and above the plane
+/// `x[axis] = pos` (the vertices on each side plus the points where edges cross the plane).
+pub fn clip_triangle(t: [Vec3; 3], part: &Aabb, axis: usize, pos: f32) -> (Aabb, Aabb) {
+    let (mut lo, mut hi) = (Aabb::EMPTY, Aabb::EMPTY);
+    for i in 0..3 {
+        let (a, b) = (t[i], t[(i + 1) % 3]);
+        if a[axis] <= pos {
+            lo = lo.grow(a);
+        }
+        if a[axis] >= pos {
+            hi = hi.grow(a);
+        }
+        if (a[axis] < pos && b[axis] > pos) || (a[axis] > pos && b[axis] < pos) {
+            let f = (pos - a[axis]) / (b[axis] - a[axis]);
+            let mut x = a + (b - a) * f;
+            x[axis] = pos;
+            lo = lo.grow(x);
+            hi = hi.grow(x);
+        }
+    }
+    let cut = |b: Aabb| {
+        let c = Aabb { min: b.min.max(part.min), max: b.max.min(part.max) };
+        if c.is_empty() {
+            Aabb::EMPTY
+        } else {
+            c
+        }
+    };
+    (cut(lo), cut(hi))
+}
+
 /// A closest hit before shading: the object, the primitive (triangle index, 0 for spheres) and
 /// the barycentrics of vertices 1 and 2 on it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -177,7 +208,10 @@ impl<'s, A: Accel> World<'s, A> {
             .map(|g| match g {
                 Geometry::Mesh(m) => {
                     let boxes: Vec<Aabb> = (0..m.indices.len()).map(|i| m.triangle_aabb(i)).collect();
-                    Some(A::build(&boxes, params))
+                    let clip = |prim: u32, part: &Aabb, axis: usize, pos: f32| {
+                        clip_triangle(m.triangle(prim as usize), part, axis, pos)
+                    };
+                    Some(A::build_clipped(&boxes, params, &clip))
                 }
                 Geometry::Sphere(_) => None,
             })

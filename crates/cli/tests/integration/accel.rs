@@ -140,7 +140,9 @@ fn every_accelerator_matches_brute_force_on_an_adversarial_scene() {
     for seed in [1, 2] {
         let scene = adversarial_scene(seed);
         let rays = rays(&scene, 3000, seed);
-        for split in [SplitMethod::Center, SplitMethod::Median, SplitMethod::Sah, SplitMethod::Morton] {
+        for split in
+            [SplitMethod::Center, SplitMethod::Median, SplitMethod::Sah, SplitMethod::Spatial, SplitMethod::Morton]
+        {
             for max_leaf_prims in [1, 4] {
                 let params = BvhParams { split, base: AccelParams { max_leaf_prims, ..AccelParams::default() } };
                 check_against_brute::<Bvh>(&format!("{split:?}/{max_leaf_prims}"), &scene, &params, &rays);

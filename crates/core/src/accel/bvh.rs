@@ -22,11 +22,213 @@ pub enum SplitMethod {
     Median,
     /// Binned surface area heuristic (16 bins on each axis).
     Sah,
+    /// SAH with spatial splits (Stich, Friedrich and Dietrich 2009): where the children of the
+    /// best object split overlap, the node may instead be cut by a plane, with primitives that
+    /// straddle it clipped into both children. Fewer overlapping boxes, some primitives
+    /// referenced twice (the references may grow by at most [`SBVH_BUDGET`] of the count).
+    Spatial,
     /// LBVH (Lauterbach et al. 2009, Karras 2012): primitives sorted once along a Morton
     /// (Z-order) curve of their centres; each node splits where the highest differing bit of
     /// the codes flips, so the hierarchy is the radix tree of the codes, built from the
     /// sorted leaves without any cost evaluation.
     Morton,
+}
+
+/// Spatial splits may add this fraction of the primitive count as extra references.
+pub const SBVH_BUDGET: f32 = 0.3;
+/// Spatial splits are tried where the object split's children overlap by more than this
+/// fraction of the root's surface area (Stich et al.'s α).
+const SBVH_ALPHA: f32 = 1e-5;
+const SPATIAL_BINS: usize = 32;
+
+/// A primitive reference of the spatial-split builder: the primitive and the box of its part.
+#[derive(Clone, Copy)]
+struct Ref {
+    prim: u32,
+    b: Aabb,
+}
+
+/// The spatial-split builder. Subtrees come back as (nodes, primitive references) with leaf
+/// `first` relative to the subtree's references and interior `first` relative to its nodes.
+struct SpatialBuilder<'a> {
+    clip: &'a super::Clipper<'a>,
+    params: AccelParams,
+    root_area: f32,
+    budget: std::sync::atomic::AtomicIsize,
+}
+
+impl SpatialBuilder<'_> {
+    fn build(&self, refs: Vec<Ref>, depth: usize) -> (Vec<Node>, Vec<u32>) {
+        let bounds = refs.iter().fold(Aabb::EMPTY, |a, r| a.union(r.b));
+        let n = refs.len();
+        let leaf = |refs: &[Ref]| {
+            (
+                vec![Node { min: bounds.min.into(), first: 0, max: bounds.max.into(), count: refs.len() as u32 }],
+                refs.iter().map(|r| r.prim).collect::<Vec<u32>>(),
+            )
+        };
+        if n <= self.params.max_leaf_prims || depth >= self.params.max_depth {
+            return leaf(&refs);
+        }
+        let (left, right) = self.split(refs, &bounds);
+        let ((ln, lp), (rn, rp)) = if n >= PARALLEL_BUILD_MIN {
+            rayon::join(|| self.build(left, depth + 1), || self.build(right, depth + 1))
+        } else {
+            (self.build(left, depth + 1), self.build(right, depth + 1))
+        };
+        let mut nodes = Vec::with_capacity(1 + ln.len() + rn.len());
+        nodes.push(Node { min: bounds.min.into(), first: (1 + ln.len()) as u32, max: bounds.max.into(), count: 0 });
+        let reloc = |n: &Node, node_off: usize, prim_off: usize| {
+            if n.count == 0 {
+                Node { first: n.first + node_off as u32, ..*n }
+            } else {
+                Node { first: n.first + prim_off as u32, ..*n }
+            }
+        };
+        nodes.extend(ln.iter().map(|n| reloc(n, 1, 0)));
+        let (roff, poff) = (1 + ln.len(), lp.len());
+        nodes.extend(rn.iter().map(|n| reloc(n, roff, poff)));
+        let mut prims = lp;
+        prims.extend(rp);
+        (nodes, prims)
+    }
+
+    /// The better of the best binned object split and the best spatial split.
+    fn split(&self, mut refs: Vec<Ref>, bounds: &Aabb) -> (Vec<Ref>, Vec<Ref>) {
+        let n = refs.len();
+        let cb = refs.iter().fold(Aabb::EMPTY, |a, r| a.grow(r.b.center()));
+        // Object split: binned SAH on the centres (16 bins per axis).
+        let mut best_o = (f32::INFINITY, 0usize, 0usize, Aabb::EMPTY, Aabb::EMPTY);
+        for axis in 0..3 {
+            let ext = cb.extent()[axis];
+            if ext <= 0.0 {
+                continue;
+            }
+            let scale = BINS as f32 / ext;
+            let bin = |r: &Ref| (((r.b.center()[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1);
+            let mut bb = [Aabb::EMPTY; BINS];
+            let mut bn = [0usize; BINS];
+            for r in &refs {
+                let k = bin(r);
+                bb[k] = bb[k].union(r.b);
+                bn[k] += 1;
+            }
+            let mut right = [(Aabb::EMPTY, 0usize); BINS];
+            let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+            for k in (1..BINS).rev() {
+                acc = acc.union(bb[k]);
+                cnt += bn[k];
+                right[k] = (acc, cnt);
+            }
+            let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+            for k in 0..BINS - 1 {
+                acc = acc.union(bb[k]);
+                cnt += bn[k];
+                let (rb, rn) = right[k + 1];
+                if cnt == 0 || rn == 0 {
+                    continue;
+                }
+                let cost = acc.half_area() * cnt as f32 + rb.half_area() * rn as f32;
+                if cost < best_o.0 {
+                    best_o = (cost, axis, k + 1, acc, rb);
+                }
+            }
+        }
+        // Spatial split, where the object split's children overlap enough and budget remains.
+        let overlap = Aabb { min: best_o.3.min.max(best_o.4.min), max: best_o.3.max.min(best_o.4.max) };
+        let try_spatial =
+            best_o.0.is_infinite() || (!overlap.is_empty() && overlap.half_area() > SBVH_ALPHA * self.root_area);
+        let mut best_s = (f32::INFINITY, 0usize, 0.0f32);
+        if try_spatial && self.budget.load(std::sync::atomic::Ordering::Relaxed) > 0 {
+            for axis in 0..3 {
+                let (lo, ext) = (bounds.min[axis], bounds.extent()[axis]);
+                if ext <= 0.0 {
+                    continue;
+                }
+                let w = ext / SPATIAL_BINS as f32;
+                let bin = |x: f32| (((x - lo) / w) as usize).min(SPATIAL_BINS - 1);
+                let mut bb = [Aabb::EMPTY; SPATIAL_BINS];
+                let mut enter = [0usize; SPATIAL_BINS];
+                let mut exit = [0usize; SPATIAL_BINS];
+                for r in &refs {
+                    let (b0, b1) = (bin(r.b.min[axis]), bin(r.b.max[axis]));
+                    enter[b0] += 1;
+                    exit[b1] += 1;
+                    let mut part = r.b;
+                    for k in b0..b1 {
+                        let (l, rest) = (self.clip)(r.prim, &part, axis, lo + (k + 1) as f32 * w);
+                        bb[k] = bb[k].union(l);
+                        part = rest;
+                    }
+                    bb[b1] = bb[b1].union(part);
+                }
+                let mut right = [(Aabb::EMPTY, 0usize); SPATIAL_BINS];
+                let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+                for k in (1..SPATIAL_BINS).rev() {
+                    acc = acc.union(bb[k]);
+                    cnt += exit[k];
+                    right[k] = (acc, cnt);
+                }
+                let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+                for k in 0..SPATIAL_BINS - 1 {
+                    acc = acc.union(bb[k]);
+                    cnt += enter[k];
+                    let (rb, rn) = right[k + 1];
+                    if cnt == 0 || rn == 0 {
+                        continue;
+                    }
+                    let cost = acc.half_area() * cnt as f32 + rb.half_area() * rn as f32;
+                    if cost < best_s.0 {
+                        best_s = (cost, axis, lo + (k + 1) as f32 * w);
+                    }
+                }
+            }
+        }
+        if best_s.0 < best_o.0 {
+            let (_, axis, pos) = best_s;
+            let (mut left, mut right) = (Vec::with_capacity(n), Vec::with_capacity(n));
+            let mut added = 0isize;
+            for r in refs {
+                if r.b.max[axis] <= pos {
+                    left.push(r);
+                } else if r.b.min[axis] >= pos {
+                    right.push(r);
+                } else {
+                    let (l, h) = (self.clip)(r.prim, &r.b, axis, pos);
+                    match (l.is_empty(), h.is_empty()) {
+                        (false, false) => {
+                            left.push(Ref { prim: r.prim, b: l });
+                            right.push(Ref { prim: r.prim, b: h });
+                            added += 1;
+                        }
+                        (false, true) => left.push(Ref { prim: r.prim, b: l }),
+                        (true, false) => right.push(Ref { prim: r.prim, b: h }),
+                        (true, true) => left.push(r),
+                    }
+                }
+            }
+            self.budget.fetch_sub(added, std::sync::atomic::Ordering::Relaxed);
+            if !left.is_empty() && !right.is_empty() {
+                return (left, right);
+            }
+            refs = left.into_iter().chain(right).collect();
+        }
+        if best_o.0.is_finite() {
+            let (_, axis, split_bin, _, _) = best_o;
+            let scale = BINS as f32 / cb.extent()[axis];
+            let (left, right): (Vec<Ref>, Vec<Ref>) = refs
+                .into_iter()
+                .partition(|r| ((((r.b.center()[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1)) < split_bin);
+            if !left.is_empty() && !right.is_empty() {
+                return (left, right);
+            }
+            let mut all = left;
+            all.extend(right);
+            refs = all;
+        }
+        let right = refs.split_off(refs.len() / 2);
+        (refs, right)
+    }
 }
 
 /// Spreads the low 10 bits of `v` to every third bit.
@@ -172,7 +374,7 @@ impl Builder<'_> {
             }
             SplitMethod::Median => n / 2,
             SplitMethod::Sah => return self.sah_partition(prims, bounds, cbounds),
-            SplitMethod::Morton => unreachable!("handled above"),
+            SplitMethod::Morton | SplitMethod::Spatial => unreachable!("handled elsewhere"),
         };
         if mid == 0 || mid == n || self.split == SplitMethod::Median {
             prims.select_nth_unstable_by(n / 2, |&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]));
@@ -433,6 +635,10 @@ impl Accel for Bvh {
     type Params = BvhParams;
 
     fn build(boxes: &[Aabb], params: &BvhParams) -> Self {
+        Self::build_clipped(boxes, params, &super::clip_box)
+    }
+
+    fn build_clipped(boxes: &[Aabb], params: &BvhParams, clip: &super::Clipper<'_>) -> Self {
         let mut prims: Vec<u32> = (0..boxes.len() as u32).filter(|&i| !boxes[i as usize].is_empty()).collect();
         let mut base = params.base;
         base.max_depth = base.max_depth.min(MAX_STACK - 1);
@@ -447,7 +653,23 @@ impl Accel for Bvh {
             Vec::new()
         };
         let b = Builder { boxes, centroids, params: base, split: params.split, codes };
-        let bin = if prims.is_empty() { Vec::new() } else { b.subtree(&mut prims, 0, 0) };
+        let bin = if prims.is_empty() {
+            Vec::new()
+        } else if params.split == SplitMethod::Spatial {
+            let refs: Vec<Ref> = prims.iter().map(|&p| Ref { prim: p, b: boxes[p as usize] }).collect();
+            let root_area = refs.iter().fold(Aabb::EMPTY, |a, r| a.union(r.b)).half_area();
+            let sb = SpatialBuilder {
+                clip,
+                params: base,
+                root_area,
+                budget: std::sync::atomic::AtomicIsize::new((prims.len() as f32 * SBVH_BUDGET) as isize),
+            };
+            let (nodes, refs) = sb.build(refs, 0);
+            prims = refs;
+            nodes
+        } else {
+            b.subtree(&mut prims, 0, 0)
+        };
         let max_depth_seen = binary_depth(&bin);
         let sah_cost = binary_sah_cost(&bin, &base);
         let (nodes, leaves, root_leaf) = match bin.first() {

@@ -36,6 +36,15 @@ pub trait Accel: Send + Sync + Sized {
     /// allowed (such primitives are never reported).
     fn build(boxes: &[Aabb], params: &Self::Params) -> Self;
 
+    /// Builds with a primitive clipper, for structures that split primitives (spatial splits):
+    /// `clip(prim, part, axis, pos)` returns the boxes of the pieces of primitive `prim` that
+    /// lie within the box `part` below and above the plane `x[axis] = pos`. By default the
+    /// clipper is ignored.
+    fn build_clipped(boxes: &[Aabb], params: &Self::Params, clip: &Clipper<'_>) -> Self {
+        let _ = clip;
+        Self::build(boxes, params)
+    }
+
     /// Closest-hit query. Calls `test(prim, t_max)` for candidate primitives; `test` returns
     /// `Some(t)` for a hit with `t < t_max` (and records what it needs), after which only
     /// closer hits are sought. `t_max` is updated in place; returns whether anything was hit.
@@ -67,6 +76,18 @@ pub trait Accel: Send + Sync + Sized {
 
     /// The boxes of the structure's nodes at `depth` (0 = the root), for pictures of it.
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb>;
+}
+
+/// Splits a primitive's box by an axis-aligned plane: `(prim, part, axis, pos) → (below, above)`.
+pub type Clipper<'a> = dyn Fn(u32, &Aabb, usize, f32) -> (Aabb, Aabb) + Sync + 'a;
+
+/// The clipper that knows only boxes: the box itself, cut by the plane.
+pub fn clip_box(_prim: u32, part: &Aabb, axis: usize, pos: f32) -> (Aabb, Aabb) {
+    let (mut lo, mut hi) = (*part, *part);
+    lo.max[axis] = lo.max[axis].min(pos);
+    hi.min[axis] = hi.min[axis].max(pos);
+    let fix = |b: Aabb| if b.min[axis] > b.max[axis] { Aabb::EMPTY } else { b };
+    (fix(lo), fix(hi))
 }
 
 /// Receives traversal events. [`NoCount`] compiles to nothing; [`Counts`] tallies them (for
@@ -159,11 +180,12 @@ pub enum AccelKind {
 
 impl AccelKind {
     /// Every kind, in the order tables list them.
-    pub const ALL: [AccelKind; 7] = [
+    pub const ALL: [AccelKind; 8] = [
         AccelKind::Brute,
         AccelKind::Bvh(SplitMethod::Center),
         AccelKind::Bvh(SplitMethod::Median),
         AccelKind::Bvh(SplitMethod::Sah),
+        AccelKind::Bvh(SplitMethod::Spatial),
         AccelKind::Bvh(SplitMethod::Morton),
         AccelKind::KdTree,
         AccelKind::Grid,
@@ -178,6 +200,7 @@ impl AccelKind {
             AccelKind::Bvh(SplitMethod::Center) => "bvh-center",
             AccelKind::Bvh(SplitMethod::Median) => "bvh-median",
             AccelKind::Bvh(SplitMethod::Sah) => "bvh-sah",
+            AccelKind::Bvh(SplitMethod::Spatial) => "bvh-sbvh",
             AccelKind::Bvh(SplitMethod::Morton) => "bvh-bottomup",
             AccelKind::KdTree => "kdtree",
             AccelKind::Grid => "grid",
