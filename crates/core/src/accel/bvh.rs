@@ -94,6 +94,7 @@ impl SpatialBuilder<'_> {
     }
 
     /// The better of the best binned object split and the best spatial split.
+    #[allow(clippy::needless_range_loop)]
     fn split(&self, mut refs: Vec<Ref>, bounds: &Aabb) -> (Vec<Ref>, Vec<Ref>) {
         let n = refs.len();
         let cb = refs.iter().fold(Aabb::EMPTY, |a, r| a.grow(r.b.center()));
