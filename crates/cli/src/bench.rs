@@ -55,6 +55,9 @@ struct Row {
     hits: usize,
     mrays_per_s: f64,
     sah_cost: f32,
+    /// Mean nodes (cells) visited and primitives tested per ray (an untimed counting pass).
+    nodes_per_ray: f64,
+    prims_per_ray: f64,
     nodes: usize,
     leaves: usize,
     depth: usize,
@@ -86,6 +89,22 @@ fn count_closest<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
     rays.par_chunks(1024).map(|c| c.iter().filter(|r| w.hit(r, f32::INFINITY).is_some()).count()).sum()
 }
 
+/// Mean traversal work per ray, counted in an untimed pass (closest hit for every workload).
+fn work_per_ray<A: Accel>(w: &World<A>, rays: &[Ray]) -> (f64, f64) {
+    let (n, p) = rays
+        .par_chunks(1024)
+        .map(|c| {
+            let counts = snell_core::accel::Counts::default();
+            for r in c {
+                w.hit_counted(r, f32::INFINITY, &counts);
+            }
+            (counts.nodes.get(), counts.prims.get())
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let k = rays.len().max(1) as f64;
+    (n as f64 / k, p as f64 / k)
+}
+
 fn count_occluded<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
     rays.par_chunks(1024).map(|c| c.iter().filter(|r| w.occluded(r, f32::INFINITY)).count()).sum()
 }
@@ -114,6 +133,7 @@ fn measure<A: Accel>(
     work.iter()
         .map(|(name, rays)| {
             let rays = subset(rays, kind);
+            let (nodes_per_ray, prims_per_ray) = work_per_ray(w, &rays);
             let (hits, secs) = if *name == "bounce-occluded" {
                 timed(reps, || count_occluded(w, &rays))
             } else {
@@ -128,6 +148,8 @@ fn measure<A: Accel>(
                 hits,
                 mrays_per_s: rays.len() as f64 / secs / 1e6,
                 sah_cost: stats.sah_cost,
+                nodes_per_ray,
+                prims_per_ray,
                 nodes: stats.nodes,
                 leaves: stats.leaves,
                 depth: stats.max_depth,
@@ -200,8 +222,20 @@ pub fn run(args: BenchArgs) -> Result<()> {
             args.reps
         );
         println!(
-            "{:<12} {:>9} {:>10} {:>16} {:>9} {:>9} {:>9} {:>8} {:>9} {:>9} {:>6}",
-            "accel", "build ms", "MiB", "workload", "rays", "hits", "Mrays/s", "SAH", "nodes", "leaves", "depth"
+            "{:<12} {:>9} {:>8} {:>16} {:>8} {:>8} {:>8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>5}",
+            "accel",
+            "build ms",
+            "MiB",
+            "workload",
+            "rays",
+            "hits",
+            "Mrays/s",
+            "SAH",
+            "nodes/ray",
+            "prims/ray",
+            "nodes",
+            "leaves",
+            "depth"
         );
     }
     for kind in kinds {
@@ -215,12 +249,24 @@ pub fn run(args: BenchArgs) -> Result<()> {
         for r in rows {
             if args.json {
                 println!(
-                    "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{threads},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.3},\"sah_cost\":{:.3},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
-                    r.accel, r.build_ms, r.accel_bytes, r.workload, r.rays, r.hits, r.mrays_per_s, r.sah_cost, r.nodes, r.leaves, r.depth
+                    "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{threads},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.3},\"sah_cost\":{:.3},\"nodes_per_ray\":{:.2},\"prims_per_ray\":{:.2},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
+                    r.accel,
+                    r.build_ms,
+                    r.accel_bytes,
+                    r.workload,
+                    r.rays,
+                    r.hits,
+                    r.mrays_per_s,
+                    r.sah_cost,
+                    r.nodes_per_ray,
+                    r.prims_per_ray,
+                    r.nodes,
+                    r.leaves,
+                    r.depth
                 );
             } else {
                 println!(
-                    "{:<12} {:>9.1} {:>10.2} {:>16} {:>9} {:>9} {:>9.2} {:>8.1} {:>9} {:>9} {:>6}",
+                    "{:<12} {:>9.1} {:>8.2} {:>16} {:>8} {:>8} {:>8.2} {:>7.1} {:>8.1} {:>8.1} {:>8} {:>8} {:>5}",
                     r.accel.name(),
                     r.build_ms,
                     r.accel_bytes as f64 / (1024.0 * 1024.0),
@@ -229,6 +275,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
                     r.hits,
                     r.mrays_per_s,
                     r.sah_cost,
+                    r.nodes_per_ray,
+                    r.prims_per_ray,
                     r.nodes,
                     r.leaves,
                     r.depth
