@@ -304,7 +304,8 @@ const BINS: usize = 16;
 /// the index of its right child.
 struct Builder<'a> {
     boxes: &'a [Aabb],
-    centroids: Vec<glam::Vec3>,
+    /// Box centres as arrays: indexing a glam vector by a run-time axis is a `match`.
+    centroids: Vec<[f32; 3]>,
     params: AccelParams,
     split: SplitMethod,
     /// Morton code per primitive (only for [`SplitMethod::Morton`]).
@@ -317,7 +318,7 @@ const PARALLEL_BUILD_MIN: usize = 16 * 1024;
 impl Builder<'_> {
     fn bounds(&self, prims: &[u32]) -> (Aabb, Aabb) {
         prims.iter().fold((Aabb::EMPTY, Aabb::EMPTY), |(b, c), &p| {
-            (b.union(self.boxes[p as usize]), c.grow(self.centroids[p as usize]))
+            (b.union(self.boxes[p as usize]), c.grow(self.centroids[p as usize].into()))
         })
     }
 
@@ -644,10 +645,10 @@ impl Accel for Bvh {
         let mut base = params.base;
         base.max_depth = base.max_depth.min(MAX_STACK - 1);
         base.max_leaf_prims = base.max_leaf_prims.max(1);
-        let centroids: Vec<glam::Vec3> = boxes.iter().map(|b| b.center()).collect();
+        let centroids: Vec<[f32; 3]> = boxes.iter().map(|b| b.center().to_array()).collect();
         let codes = if params.split == SplitMethod::Morton {
-            let cb = prims.iter().fold(Aabb::EMPTY, |b, &p| b.grow(centroids[p as usize]));
-            let codes: Vec<u32> = centroids.iter().map(|c| morton(*c, &cb)).collect();
+            let cb = prims.iter().fold(Aabb::EMPTY, |b, &p| b.grow(centroids[p as usize].into()));
+            let codes: Vec<u32> = centroids.iter().map(|c| morton((*c).into(), &cb)).collect();
             prims.sort_unstable_by_key(|&p| (codes[p as usize], p));
             codes
         } else {

@@ -39,6 +39,7 @@ impl WatertightRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
+        let d = d.to_array();
         WatertightRay { o, kx, ky, kz, sx: d[kx] / d[kz], sy: d[ky] / d[kz], sz: 1.0 / d[kz] }
     }
 }
@@ -64,9 +65,10 @@ fn edge_functions_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (
 /// Intersects the triangle `(p0, p1, p2)` with the ray, accepting `0 < t < t_max`.
 #[inline(always)]
 pub fn intersect_triangle(r: &WatertightRay, p0: Vec3, p1: Vec3, p2: Vec3, t_max: f32) -> Option<TriHit> {
-    let a = p0 - r.o;
-    let b = p1 - r.o;
-    let c = p2 - r.o;
+    // Plain arrays: indexing a glam vector by a run-time axis is a `match`, i.e. branches.
+    let a = (p0 - r.o).to_array();
+    let b = (p1 - r.o).to_array();
+    let c = (p2 - r.o).to_array();
     let (kx, ky, kz) = (r.kx, r.ky, r.kz);
     let ax = a[kx] - r.sx * a[kz];
     let ay = a[ky] - r.sy * a[kz];
