@@ -109,10 +109,12 @@ fn count_occluded<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
     rays.par_chunks(1024).map(|c| c.iter().filter(|r| w.occluded(r, f32::INFINITY)).count()).sum()
 }
 
-/// The brute-force oracle is far too slow for a million rays: it traces every `stride`-th ray.
-fn subset(rays: &[Ray], kind: AccelKind) -> Vec<Ray> {
+/// The brute-force oracle is far too slow for a million rays: it traces every `stride`-th
+/// ray, at most 2,048 and at most as many as keep it near 10^8 triangle tests per pass.
+fn subset(rays: &[Ray], kind: AccelKind, tris: usize) -> Vec<Ray> {
     if kind == AccelKind::Brute {
-        let stride = (rays.len() / 2048).max(1);
+        let max = (100_000_000 / tris.max(1)).clamp(16, 2048);
+        let stride = rays.len().div_ceil(max).max(1);
         rays.iter().step_by(stride).copied().collect()
     } else {
         rays.to_vec()
@@ -132,7 +134,7 @@ fn measure<A: Accel>(
     let bytes = stats.bytes + top.stats().bytes;
     work.iter()
         .map(|(name, rays)| {
-            let rays = subset(rays, kind);
+            let rays = subset(rays, kind, w.scene.triangle_count());
             let (nodes_per_ray, prims_per_ray) = work_per_ray(w, &rays);
             let (hits, secs) = if *name == "bounce-occluded" {
                 timed(reps, || count_occluded(w, &rays))
