@@ -16,66 +16,13 @@ use snell_core::scene::{Geometry, Object, Scene};
 use snell_core::shape::Mesh;
 use snell_core::{with_world, Rgb};
 
-fn icosphere(subdiv: u32) -> Mesh {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut p: Vec<Vec3> = [
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ]
-    .iter()
-    .map(|v| Vec3::from(*v).normalize())
-    .collect();
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..subdiv {
-        let mut cache = std::collections::HashMap::new();
-        let mut mid = |a: u32, b: u32, p: &mut Vec<Vec3>| -> u32 {
-            *cache.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
-                p.len() as u32 - 1
-            })
-        };
-        f = f
-            .iter()
-            .flat_map(|&[a, b, c]| {
-                let (ab, bc, ca) = (mid(a, b, &mut p), mid(b, c, &mut p), mid(c, a, &mut p));
-                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-            })
-            .collect();
+/// The icosphere with a smooth bumpy displacement, so that the surface is not convex.
+fn bumpy_icosphere(subdiv: u32) -> Mesh {
+    let mut m = Mesh::icosphere(subdiv);
+    for v in &mut m.positions {
+        *v *= 1.0 + 0.15 * (5.0 * v.x).sin() * (7.0 * v.y).cos() * (3.0 * v.z).sin();
     }
-    // A smooth bumpy displacement, so the surface is not convex.
-    let p = p.iter().map(|v| *v * (1.0 + 0.15 * (5.0 * v.x).sin() * (7.0 * v.y).cos() * (3.0 * v.z).sin())).collect();
-    Mesh { positions: p, normals: None, uvs: None, indices: f }
+    m
 }
 
 fn scene(mesh: Mesh) -> Scene {
@@ -91,7 +38,7 @@ fn scene(mesh: Mesh) -> Scene {
 }
 
 fn benches(c: &mut Criterion) {
-    let s = scene(icosphere(5));
+    let s = scene(bumpy_icosphere(5));
     let Geometry::Mesh(mesh) = &s.geometries[0] else { unreachable!() };
     let primary = snell_core::bench::primary_rays(&mesh.positions, 128, 128, 40.0);
     let params = AccelParams::default();

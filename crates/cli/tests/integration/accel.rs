@@ -203,67 +203,14 @@ fn bvh_statistics_are_sane() {
     assert!(soup.sah_cost > 1.0 && soup.sah_cost < m.indices.len() as f32);
 }
 
-/// An icosphere: closed, every edge shared by two triangles, every vertex by five or six.
+/// An icosphere (closed, every edge shared by two triangles, every vertex by five or six),
+/// moved and scaled so that its coordinates are not round numbers.
 pub fn icosphere(subdiv: u32) -> Mesh {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut p: Vec<Vec3> = [
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ]
-    .iter()
-    .map(|v| Vec3::from(*v).normalize())
-    .collect();
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..subdiv {
-        let mut cache = std::collections::HashMap::new();
-        let mut mid = |a: u32, b: u32, p: &mut Vec<Vec3>| -> u32 {
-            *cache.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
-                p.len() as u32 - 1
-            })
-        };
-        f = f
-            .iter()
-            .flat_map(|&[a, b, c]| {
-                let (ab, bc, ca) = (mid(a, b, &mut p), mid(b, c, &mut p), mid(c, a, &mut p));
-                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-            })
-            .collect();
+    let mut m = Mesh::icosphere(subdiv);
+    for p in &mut m.positions {
+        *p = *p * 1.37 + Vec3::new(0.1, -0.3, 0.7);
     }
-    // Non-round coordinates make the edge and vertex cases hard.
-    let p = p.iter().map(|v| *v * 1.37 + Vec3::new(0.1, -0.3, 0.7)).collect();
-    Mesh { positions: p, normals: None, uvs: None, indices: f }
+    m
 }
 
 /// Rays that cross the surface exactly at every vertex and every edge midpoint of `mesh` must

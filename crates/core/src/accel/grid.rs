@@ -13,7 +13,7 @@
 
 use glam::Vec3;
 
-use super::{Accel, AccelParams, AccelStats, BuildParams, Counter};
+use super::{Accel, AccelParams, AccelStats, BuildParams, Counter, OrderedLeaves};
 use crate::geometry::{Aabb, Ray};
 
 /// Grid build settings.
@@ -37,7 +37,6 @@ impl BuildParams for GridParams {
 const MAX_RES: u32 = 1024;
 /// Most cells in all.
 const MAX_CELLS: u64 = 1 << 26;
-const MAILBOX: usize = 64;
 
 /// A uniform grid over primitive boxes.
 pub struct Grid {
@@ -62,10 +61,10 @@ impl Grid {
         [0, 1, 2].map(|a| (q[a].floor() as i64).clamp(0, self.res[a] as i64 - 1) as i32)
     }
 
-    /// Walks the cells the ray pierces within `[0, t_max]`, nearest first. `visit(cell, t_exit)`
+    /// Walks the cells the ray pierces within `[0, t_max]`, nearest first. `visit(prims, t_exit)`
     /// returns false to stop.
     #[inline]
-    fn walk(&self, ray: &Ray, t_max: f32, counter: &impl Counter, mut visit: impl FnMut(usize, f32) -> bool) {
+    fn walk(&self, ray: &Ray, t_max: f32, counter: &impl Counter, mut visit: impl FnMut(&[u32], f32) -> bool) {
         if self.cell_prims.is_empty() {
             return;
         }
@@ -108,7 +107,7 @@ impl Grid {
             };
             let t_exit = next[a];
             counter.node();
-            if !visit(self.cell_index(cell), t_exit) {
+            if !visit(self.prims_in(self.cell_index(cell)), t_exit) {
                 return;
             }
             if t_exit > t_max || step[a] == 0 {
@@ -120,6 +119,14 @@ impl Grid {
             }
             next[a] += delta[a];
         }
+    }
+
+    /// Indices of the cells that the box `b` overlaps.
+    fn cells_of(&self, b: &Aabb) -> impl Iterator<Item = usize> + '_ {
+        let (lo, hi) = (self.cell_of(b.min), self.cell_of(b.max));
+        (lo[2]..=hi[2]).flat_map(move |z| {
+            (lo[1]..=hi[1]).flat_map(move |y| (lo[0]..=hi[0]).map(move |x| self.cell_index([x, y, z])))
+        })
     }
 
     fn prims_in(&self, cell: usize) -> &[u32] {
@@ -162,35 +169,25 @@ impl Accel for Grid {
             stats: AccelStats::default(),
         };
         // Two passes over the primitives' cell ranges: count, then fill (CSR layout).
-        let range = |g: &Grid, b: &Aabb| (g.cell_of(b.min), g.cell_of(b.max));
+        let mut counts = vec![0u32; ncells + 1];
         for &p in &prims {
-            let (lo, hi) = range(&grid, &boxes[p as usize]);
-            for z in lo[2]..=hi[2] {
-                for y in lo[1]..=hi[1] {
-                    for x in lo[0]..=hi[0] {
-                        let c = grid.cell_index([x, y, z]);
-                        grid.cell_start[c + 1] += 1;
-                    }
-                }
+            for c in grid.cells_of(&boxes[p as usize]) {
+                counts[c + 1] += 1;
             }
         }
         for c in 0..ncells {
-            grid.cell_start[c + 1] += grid.cell_start[c];
+            counts[c + 1] += counts[c];
         }
-        let mut fill = grid.cell_start.clone();
-        grid.cell_prims = vec![0; grid.cell_start[ncells] as usize];
+        let mut fill = counts.clone();
+        let mut cell_prims = vec![0; counts[ncells] as usize];
         for &p in &prims {
-            let (lo, hi) = range(&grid, &boxes[p as usize]);
-            for z in lo[2]..=hi[2] {
-                for y in lo[1]..=hi[1] {
-                    for x in lo[0]..=hi[0] {
-                        let c = grid.cell_index([x, y, z]);
-                        grid.cell_prims[fill[c] as usize] = p;
-                        fill[c] += 1;
-                    }
-                }
+            for c in grid.cells_of(&boxes[p as usize]) {
+                cell_prims[fill[c] as usize] = p;
+                fill[c] += 1;
             }
         }
+        grid.cell_start = counts;
+        grid.cell_prims = cell_prims;
         let nonempty = (0..ncells).filter(|&c| grid.cell_start[c + 1] > grid.cell_start[c]).count();
         grid.stats = AccelStats {
             nodes: ncells,
@@ -211,27 +208,10 @@ impl Accel for Grid {
         mut test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        let mut mailbox = [u32::MAX; MAILBOX];
-        let mut hit = false;
-        let limit = *t_max;
-        let mut best = limit;
-        self.walk(ray, limit, counter, |cell, t_exit| {
-            for &p in self.prims_in(cell) {
-                let slot = &mut mailbox[p as usize % MAILBOX];
-                if *slot == p {
-                    continue;
-                }
-                *slot = p;
-                if let Some(t) = test(p, best) {
-                    best = t;
-                    hit = true;
-                }
-            }
-            // A hit inside this cell cannot be beaten by a primitive in a later cell.
-            best > t_exit
-        });
-        *t_max = best;
-        hit
+        let mut leaves = OrderedLeaves::new(*t_max);
+        self.walk(ray, *t_max, counter, |prims, t_exit| leaves.closest(prims, t_exit, &mut test));
+        *t_max = leaves.best;
+        leaves.hit
     }
 
     fn any_counted(
@@ -241,23 +221,9 @@ impl Accel for Grid {
         mut test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        let mut mailbox = [u32::MAX; MAILBOX];
-        let mut hit = false;
-        self.walk(ray, t_max, counter, |cell, _| {
-            for &p in self.prims_in(cell) {
-                let slot = &mut mailbox[p as usize % MAILBOX];
-                if *slot == p {
-                    continue;
-                }
-                *slot = p;
-                if test(p, t_max) {
-                    hit = true;
-                    return false;
-                }
-            }
-            true
-        });
-        hit
+        let mut leaves = OrderedLeaves::new(t_max);
+        self.walk(ray, t_max, counter, |prims, _| leaves.any(prims, t_max, &mut test));
+        leaves.hit
     }
 
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {

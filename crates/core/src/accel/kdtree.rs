@@ -11,7 +11,7 @@
 //! Primitives listed in several leaves are tested once per ray (64-entry mailbox, as in
 //! [`super::Grid`]).
 
-use super::{Accel, AccelParams, AccelStats, BuildParams, Counter};
+use super::{Accel, AccelParams, AccelStats, BuildParams, Counter, OrderedLeaves};
 use crate::geometry::{Aabb, Ray};
 
 /// k-d tree build settings.
@@ -55,7 +55,6 @@ struct KdNode {
 
 const LEAF: u32 = 3;
 const BINS: usize = 32;
-const MAILBOX: usize = 64;
 const MAX_STACK: usize = 64;
 
 /// A k-d tree over primitive boxes.
@@ -254,26 +253,10 @@ impl Accel for KdTree {
         mut test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        let mut mailbox = [u32::MAX; MAILBOX];
-        let mut best = *t_max;
-        let mut hit = false;
-        self.walk(ray, *t_max, counter, |prims, t_exit| {
-            for &p in prims {
-                let slot = &mut mailbox[p as usize % MAILBOX];
-                if *slot == p {
-                    continue;
-                }
-                *slot = p;
-                if let Some(t) = test(p, best) {
-                    best = t;
-                    hit = true;
-                }
-            }
-            // Leaves come front to back and do not overlap: a hit inside this one is final.
-            best > t_exit
-        });
-        *t_max = best;
-        hit
+        let mut leaves = OrderedLeaves::new(*t_max);
+        self.walk(ray, *t_max, counter, |prims, t_exit| leaves.closest(prims, t_exit, &mut test));
+        *t_max = leaves.best;
+        leaves.hit
     }
 
     fn any_counted(
@@ -283,23 +266,9 @@ impl Accel for KdTree {
         mut test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        let mut mailbox = [u32::MAX; MAILBOX];
-        let mut hit = false;
-        self.walk(ray, t_max, counter, |prims, _| {
-            for &p in prims {
-                let slot = &mut mailbox[p as usize % MAILBOX];
-                if *slot == p {
-                    continue;
-                }
-                *slot = p;
-                if test(p, t_max) {
-                    hit = true;
-                    return false;
-                }
-            }
-            true
-        });
-        hit
+        let mut leaves = OrderedLeaves::new(t_max);
+        self.walk(ray, t_max, counter, |prims, _| leaves.any(prims, t_max, &mut test));
+        leaves.hit
     }
 
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {

@@ -78,6 +78,59 @@ pub trait Accel: Send + Sync + Sized {
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb>;
 }
 
+/// Closest and any hit over leaves that a traversal visits front to back and that do not
+/// overlap along the ray (grid cells, k-d tree leaves), with a per-ray mailbox: a primitive
+/// listed in several leaves is tested once. The mailbox is a 64-entry direct-mapped cache of
+/// primitive ids; a collision only means a repeated test, never a wrong answer.
+pub(crate) struct OrderedLeaves {
+    mailbox: [u32; 64],
+    pub best: f32,
+    pub hit: bool,
+}
+
+impl OrderedLeaves {
+    #[inline]
+    pub fn new(t_max: f32) -> OrderedLeaves {
+        OrderedLeaves { mailbox: [u32::MAX; 64], best: t_max, hit: false }
+    }
+
+    /// True the first time this ray meets `p`.
+    #[inline]
+    fn fresh(&mut self, p: u32) -> bool {
+        let slot = &mut self.mailbox[p as usize % 64];
+        let fresh = *slot != p;
+        *slot = p;
+        fresh
+    }
+
+    /// Tests a leaf for the closest hit; returns whether to go on to the next leaf (no hit
+    /// found yet within this leaf's exit distance `t_exit`).
+    #[inline]
+    pub fn closest(&mut self, prims: &[u32], t_exit: f32, test: &mut impl FnMut(u32, f32) -> Option<f32>) -> bool {
+        for &p in prims {
+            if self.fresh(p) {
+                if let Some(t) = test(p, self.best) {
+                    self.best = t;
+                    self.hit = true;
+                }
+            }
+        }
+        self.best > t_exit
+    }
+
+    /// Tests a leaf for any hit within `t_max`; returns whether to go on.
+    #[inline]
+    pub fn any(&mut self, prims: &[u32], t_max: f32, test: &mut impl FnMut(u32, f32) -> bool) -> bool {
+        for &p in prims {
+            if self.fresh(p) && test(p, t_max) {
+                self.hit = true;
+                return false;
+            }
+        }
+        true
+    }
+}
+
 /// Splits a primitive's box by an axis-aligned plane: `(prim, part, axis, pos) → (below, above)`.
 pub type Clipper<'a> = dyn Fn(u32, &Aabb, usize, f32) -> (Aabb, Aabb) + Sync + 'a;
 

@@ -118,6 +118,68 @@ impl Mesh {
         Mesh { positions, normals: None, uvs: None, indices }
     }
 
+    /// The unit sphere as a subdivided icosahedron: closed, `20 · 4^subdiv` outward-facing
+    /// triangles, every edge shared by two of them.
+    pub fn icosphere(subdiv: u32) -> Mesh {
+        let t = (1.0 + 5f32.sqrt()) / 2.0;
+        let mut p: Vec<Vec3> = [
+            [-1.0, t, 0.0],
+            [1.0, t, 0.0],
+            [-1.0, -t, 0.0],
+            [1.0, -t, 0.0],
+            [0.0, -1.0, t],
+            [0.0, 1.0, t],
+            [0.0, -1.0, -t],
+            [0.0, 1.0, -t],
+            [t, 0.0, -1.0],
+            [t, 0.0, 1.0],
+            [-t, 0.0, -1.0],
+            [-t, 0.0, 1.0],
+        ]
+        .iter()
+        .map(|v| Vec3::from(*v).normalize())
+        .collect();
+        let mut f: Vec<[u32; 3]> = vec![
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ];
+        for _ in 0..subdiv {
+            let mut mids = std::collections::HashMap::new();
+            let mut mid = |a: u32, b: u32, p: &mut Vec<Vec3>| -> u32 {
+                *mids.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
+                    p.len() as u32 - 1
+                })
+            };
+            f = f
+                .iter()
+                .flat_map(|&[a, b, c]| {
+                    let (ab, bc, ca) = (mid(a, b, &mut p), mid(b, c, &mut p), mid(c, a, &mut p));
+                    [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+                })
+                .collect();
+        }
+        Mesh { positions: p, normals: None, uvs: None, indices: f }
+    }
+
     /// A parallelogram `corner + s·edge1 + t·edge2`, `s, t ∈ [0, 1]`, facing `edge1 × edge2`.
     pub fn quad(corner: Vec3, edge1: Vec3, edge2: Vec3) -> Mesh {
         Mesh {
@@ -142,6 +204,21 @@ mod tests {
             let n = (b - a).cross(d - a);
             assert!(n.dot(a - c) > 0.0, "face {i} points inwards");
         }
+    }
+
+    #[test]
+    fn icosphere_is_closed_and_faces_outwards() {
+        let m = Mesh::icosphere(2);
+        assert_eq!(m.indices.len(), 320);
+        let mut edges = std::collections::HashMap::new();
+        for (i, t) in m.indices.iter().enumerate() {
+            let [a, b, c] = m.triangle(i);
+            assert!((b - a).cross(c - a).dot(a) > 0.0);
+            for k in 0..3 {
+                *edges.entry((t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))).or_insert(0) += 1;
+            }
+        }
+        assert!(edges.values().all(|&n| n == 2));
     }
 
     #[test]
