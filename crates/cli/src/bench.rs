@@ -251,7 +251,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         for r in rows {
             if args.json {
                 println!(
-                    "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{threads},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.3},\"sah_cost\":{:.3},\"nodes_per_ray\":{:.2},\"prims_per_ray\":{:.2},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
+                    "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{threads},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.6},\"sah_cost\":{:.3},\"nodes_per_ray\":{:.2},\"prims_per_ray\":{:.2},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
                     r.accel,
                     r.build_ms,
                     r.accel_bytes,
