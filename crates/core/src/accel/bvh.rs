@@ -114,24 +114,9 @@ impl SpatialBuilder<'_> {
                 bb[k] = bb[k].union(r.b);
                 bn[k] += 1;
             }
-            let mut right = [(Aabb::EMPTY, 0usize); BINS];
-            let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
-            for k in (1..BINS).rev() {
-                acc = acc.union(bb[k]);
-                cnt += bn[k];
-                right[k] = (acc, cnt);
-            }
-            let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
-            for k in 0..BINS - 1 {
-                acc = acc.union(bb[k]);
-                cnt += bn[k];
-                let (rb, rn) = right[k + 1];
-                if cnt == 0 || rn == 0 {
-                    continue;
-                }
-                let cost = acc.half_area() * cnt as f32 + rb.half_area() * rn as f32;
+            if let Some((cost, k, lb, rb)) = sah_sweep(&bb, &bn, &bn) {
                 if cost < best_o.0 {
-                    best_o = (cost, axis, k + 1, acc, rb);
+                    best_o = (cost, axis, k, lb, rb);
                 }
             }
         }
@@ -163,24 +148,9 @@ impl SpatialBuilder<'_> {
                     }
                     bb[b1] = bb[b1].union(part);
                 }
-                let mut right = [(Aabb::EMPTY, 0usize); SPATIAL_BINS];
-                let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
-                for k in (1..SPATIAL_BINS).rev() {
-                    acc = acc.union(bb[k]);
-                    cnt += exit[k];
-                    right[k] = (acc, cnt);
-                }
-                let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
-                for k in 0..SPATIAL_BINS - 1 {
-                    acc = acc.union(bb[k]);
-                    cnt += enter[k];
-                    let (rb, rn) = right[k + 1];
-                    if cnt == 0 || rn == 0 {
-                        continue;
-                    }
-                    let cost = acc.half_area() * cnt as f32 + rb.half_area() * rn as f32;
+                if let Some((cost, k, _, _)) = sah_sweep(&bb, &enter, &exit) {
                     if cost < best_s.0 {
-                        best_s = (cost, axis, lo + (k + 1) as f32 * w);
+                        best_s = (cost, axis, lo + k as f32 * w);
                     }
                 }
             }
@@ -332,7 +302,7 @@ impl Builder<'_> {
         if n <= self.params.max_leaf_prims || depth >= self.params.max_depth {
             return;
         }
-        let mid = self.partition(prims, &bounds, &cbounds);
+        let mid = self.partition(prims, &cbounds);
         let (l, r) = prims.split_at_mut(mid);
         if n >= PARALLEL_BUILD_MIN {
             let (ln, rn) =
@@ -358,7 +328,7 @@ impl Builder<'_> {
     }
 
     /// Reorders `prims` and returns the split index, always in `1..n`.
-    fn partition(&self, prims: &mut [u32], bounds: &Aabb, cbounds: &Aabb) -> usize {
+    fn partition(&self, prims: &mut [u32], cbounds: &Aabb) -> usize {
         let n = prims.len();
         if self.split == SplitMethod::Morton {
             return self.morton_partition(prims);
@@ -375,7 +345,7 @@ impl Builder<'_> {
                 partition_in_place(prims, |p| c[p as usize][axis] < plane)
             }
             SplitMethod::Median => n / 2,
-            SplitMethod::Sah => return self.sah_partition(prims, bounds, cbounds),
+            SplitMethod::Sah => return self.sah_partition(prims, cbounds),
             SplitMethod::Morton | SplitMethod::Spatial => unreachable!("handled elsewhere"),
         };
         if mid == 0 || mid == n || self.split == SplitMethod::Median {
@@ -399,7 +369,7 @@ impl Builder<'_> {
     }
 
     #[allow(clippy::needless_range_loop)]
-    fn sah_partition(&self, prims: &mut [u32], bounds: &Aabb, cbounds: &Aabb) -> usize {
+    fn sah_partition(&self, prims: &mut [u32], cbounds: &Aabb) -> usize {
         let c = &self.centroids;
         let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, bins on the left
         for axis in 0..3 {
@@ -416,27 +386,9 @@ impl Builder<'_> {
                 bin_n[b] += 1;
                 bin_box[b] = bin_box[b].union(self.boxes[p as usize]);
             }
-            // Sweep from the right, then from the left.
-            let mut right_area = [0.0f32; BINS];
-            let (mut acc, mut cnt) = (Aabb::EMPTY, 0usize);
-            let mut right_n = [0usize; BINS];
-            for i in (1..BINS).rev() {
-                acc = acc.union(bin_box[i]);
-                cnt += bin_n[i];
-                right_area[i] = acc.half_area();
-                right_n[i] = cnt;
-            }
-            let (mut acc, mut cnt) = (Aabb::EMPTY, 0usize);
-            for i in 0..BINS - 1 {
-                acc = acc.union(bin_box[i]);
-                cnt += bin_n[i];
-                let (nl, nr) = (cnt, right_n[i + 1]);
-                if nl == 0 || nr == 0 {
-                    continue;
-                }
-                let cost = acc.half_area() * nl as f32 + right_area[i + 1] * nr as f32;
+            if let Some((cost, k, _, _)) = sah_sweep(&bin_box, &bin_n, &bin_n) {
                 if cost < best.0 {
-                    best = (cost, axis, i + 1);
+                    best = (cost, axis, k);
                 }
             }
         }
@@ -447,7 +399,6 @@ impl Builder<'_> {
         let (_, axis, split_bin) = best;
         let lo = cbounds.min[axis];
         let scale = BINS as f32 / cbounds.extent()[axis];
-        let _ = bounds;
         let mid =
             partition_in_place(prims, |p| (((c[p as usize][axis] - lo) * scale) as usize).min(BINS - 1) < split_bin);
         if mid == 0 || mid == n {
@@ -456,6 +407,41 @@ impl Builder<'_> {
             mid
         }
     }
+}
+
+/// The SAH sweep over `N` bins: the best plane between two bins, as the index `k` of the first
+/// bin on its right. Each bin has the box of what lies in it, the number of references that
+/// start in it (`starts`, counted on the left of planes after it) and that end in it (`ends`,
+/// counted on the right of planes before it); for object splits both are the bin counts.
+/// Returns `(cost, k, left box, right box)` with cost `A(L)·nL + A(R)·nR` (half areas), or
+/// `None` if no plane has references on both sides.
+fn sah_sweep<const N: usize>(
+    boxes: &[Aabb; N],
+    starts: &[usize; N],
+    ends: &[usize; N],
+) -> Option<(f32, usize, Aabb, Aabb)> {
+    let mut right = [(Aabb::EMPTY, 0usize); N];
+    let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+    for k in (1..N).rev() {
+        acc = acc.union(boxes[k]);
+        cnt += ends[k];
+        right[k] = (acc, cnt);
+    }
+    let mut best: Option<(f32, usize, Aabb, Aabb)> = None;
+    let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+    for k in 0..N - 1 {
+        acc = acc.union(boxes[k]);
+        cnt += starts[k];
+        let (rb, rn) = right[k + 1];
+        if cnt == 0 || rn == 0 {
+            continue;
+        }
+        let cost = acc.half_area() * cnt as f32 + rb.half_area() * rn as f32;
+        if best.is_none_or(|b| cost < b.0) {
+            best = Some((cost, k + 1, acc, rb));
+        }
+    }
+    best
 }
 
 /// Appends `sub` (indices relative to its start) to `out`, moving it to start at `at`.
@@ -543,8 +529,7 @@ struct RayPre {
 
 impl RayPre {
     #[inline]
-    fn new(ray: &Ray) -> RayPre {
-        let inv = ray.d.recip();
+    fn new(ray: &Ray, inv: glam::Vec3) -> RayPre {
         let near = [0, 1, 2].map(|a| if inv[a] < 0.0 { 3 + a } else { a });
         RayPre { o: ray.o.to_array(), inv: inv.to_array(), near, far: near.map(|n| if n >= 3 { n - 3 } else { n + 3 }) }
     }
@@ -701,7 +686,8 @@ impl Accel for Bvh {
         mut test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        if self.root_box.slab(ray.o, ray.d.recip(), 0.0, *t_max).is_none() {
+        let inv = ray.d.recip();
+        if self.root_box.slab(ray.o, inv, 0.0, *t_max).is_none() {
             return false;
         }
         let mut hit = false;
@@ -717,7 +703,7 @@ impl Accel for Bvh {
         if self.nodes.is_empty() {
             return false;
         }
-        let r = RayPre::new(ray);
+        let r = RayPre::new(ray, inv);
         // Uninitialised: zeroing 1.5 KiB per ray showed up in profiles. Only entries below `sp`
         // are read, and each was written first.
         let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
@@ -762,7 +748,8 @@ impl Accel for Bvh {
         mut test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        if self.root_box.slab(ray.o, ray.d.recip(), 0.0, t_max).is_none() {
+        let inv = ray.d.recip();
+        if self.root_box.slab(ray.o, inv, 0.0, t_max).is_none() {
             return false;
         }
         if self.root_leaf {
@@ -771,7 +758,7 @@ impl Accel for Bvh {
         if self.nodes.is_empty() {
             return false;
         }
-        let r = RayPre::new(ray);
+        let r = RayPre::new(ray, inv);
         let mut stack = [std::mem::MaybeUninit::<u32>::uninit(); 3 * MAX_STACK];
         stack[0].write(0);
         let mut sp = 1usize;
