@@ -9,7 +9,7 @@ use crate::geometry::{Aabb, Ray, Transform};
 use crate::light::{AreaLight, AreaShape, Light};
 use crate::material::Material;
 use crate::sampling::build_cdf;
-use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Sphere, WatertightRay};
+use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Ray4, Sphere, Tri4, TriHit, WatertightRay};
 use crate::Rgb;
 
 /// Shared geometry: an object refers to it by index, so many objects (instances) can share
@@ -187,15 +187,119 @@ pub struct Intersection {
     pub object: u32,
 }
 
+/// The triangles of one mesh, laid out for its bottom-level structure: in blocks of four per
+/// leaf ([`Tri4`], tested four at a time) when the structure tests whole leaves, otherwise one
+/// 36-byte record of corners per triangle (no gather through the index buffer either way).
+enum TriData {
+    /// `blocks[ranges[leaf].0 .. ranges[leaf].1]` hold the triangles of each leaf.
+    Leaves {
+        blocks: Vec<Tri4>,
+        ranges: Vec<(u32, u32)>,
+    },
+    Single(Vec<[Vec3; 3]>),
+}
+
+impl TriData {
+    fn new<A: Accel>(m: &Mesh, accel: &A) -> TriData {
+        let Some(leaves) = accel.leaves() else {
+            return TriData::Single((0..m.indices.len()).map(|i| m.triangle(i)).collect());
+        };
+        let mut blocks = Vec::new();
+        let ranges = leaves
+            .iter()
+            .map(|prims| {
+                let start = blocks.len() as u32;
+                for chunk in prims.chunks(4) {
+                    let tris: Vec<(u32, [Vec3; 3])> = chunk.iter().map(|&p| (p, m.triangle(p as usize))).collect();
+                    blocks.push(Tri4::pack(&tris));
+                }
+                (start, blocks.len() as u32)
+            })
+            .collect();
+        TriData::Leaves { blocks, ranges }
+    }
+
+    /// Closest triangle hit with `t < t_max` (updated): `(triangle, hit)`.
+    #[inline(always)]
+    fn closest<A: Accel>(
+        &self,
+        accel: &A,
+        ray: &Ray,
+        wr: WatertightRay,
+        t_max: &mut f32,
+        counter: &impl Counter,
+    ) -> Option<(u32, TriHit)> {
+        let mut rec = None;
+        match self {
+            TriData::Leaves { blocks, ranges } => {
+                let r4 = Ray4::new(wr);
+                accel.closest_leaf_counted(
+                    ray,
+                    t_max,
+                    |leaf, mut tm| {
+                        let (a, b) = ranges[leaf as usize];
+                        let mut found = None;
+                        for block in &blocks[a as usize..b as usize] {
+                            for _ in 0..block.len() {
+                                counter.prim();
+                            }
+                            if let Some((tri, h)) = block.closest(&r4, tm) {
+                                tm = h.t;
+                                found = Some(h.t);
+                                rec = Some((tri, h));
+                            }
+                        }
+                        found
+                    },
+                    counter,
+                );
+            }
+            TriData::Single(tris) => {
+                accel.closest_counted(
+                    ray,
+                    t_max,
+                    |tri, tm| {
+                        counter.prim();
+                        let [a, b, c] = tris[tri as usize];
+                        intersect_triangle(&wr, a, b, c, tm).map(|h| {
+                            rec = Some((tri, h));
+                            h.t
+                        })
+                    },
+                    counter,
+                );
+            }
+        }
+        rec
+    }
+
+    /// Whether any triangle is hit with `t < t_max`.
+    #[inline(always)]
+    fn any<A: Accel>(&self, accel: &A, ray: &Ray, wr: WatertightRay, t_max: f32) -> bool {
+        match self {
+            TriData::Leaves { blocks, ranges } => {
+                let r4 = Ray4::new(wr);
+                accel.any_leaf(ray, t_max, |leaf, tm| {
+                    let (a, b) = ranges[leaf as usize];
+                    blocks[a as usize..b as usize].iter().any(|block| block.any(&r4, tm))
+                })
+            }
+            TriData::Single(tris) => accel.any(ray, t_max, |tri, tm| {
+                let [a, b, c] = tris[tri as usize];
+                intersect_triangle(&wr, a, b, c, tm).is_some()
+            }),
+        }
+    }
+}
+
 /// A scene with its acceleration structures: one per mesh (bottom level) and one over the
 /// objects (top level). Also the list of all lights, area lights included.
 pub struct World<'s, A: Accel> {
     pub scene: &'s Scene,
     top: A,
     blas: Vec<Option<A>>,
-    /// Per mesh geometry, the corners of each triangle (object space), so that the triangle
-    /// test reads one 36-byte record instead of gathering through the index buffer.
-    tris: Vec<Vec<[Vec3; 3]>>,
+    /// Per geometry, the triangles laid out for its bottom-level structure.
+    tris: Vec<TriData>,
     pub lights: Vec<Light>,
 }
 
@@ -219,9 +323,10 @@ impl<'s, A: Accel> World<'s, A> {
         let tris = scene
             .geometries
             .iter()
-            .map(|g| match g {
-                Geometry::Mesh(m) => (0..m.indices.len()).map(|i| m.triangle(i)).collect(),
-                Geometry::Sphere(_) => Vec::new(),
+            .zip(&blas)
+            .map(|(g, accel)| match (g, accel) {
+                (Geometry::Mesh(m), Some(accel)) => TriData::new(m, accel),
+                _ => TriData::Single(Vec::new()),
             })
             .collect();
         let boxes: Vec<Aabb> = scene.objects.iter().map(|o| scene.object_aabb(o)).collect();
@@ -277,27 +382,11 @@ impl<'s, A: Accel> World<'s, A> {
                     }),
                     Geometry::Mesh(_) => {
                         let accel = self.blas[o.geometry].as_ref()?;
-                        let tris = &self.tris[o.geometry];
                         let wr = WatertightRay::new(local.o, local.d);
                         let mut tm = tmax;
-                        let mut rec = None;
-                        accel.closest_counted(
-                            &local,
-                            &mut tm,
-                            |tri, tmx| {
-                                counter.prim();
-                                let [a, b, c] = tris[tri as usize];
-                                intersect_triangle(&wr, a, b, c, tmx).map(|h| {
-                                    rec = Some((tri, h.b1, h.b2));
-                                    h.t
-                                })
-                            },
-                            counter,
-                        );
-                        rec.map(|(tri, b1, b2)| {
-                            best = Some((obj, tri, b1, b2));
-                            tm
-                        })
+                        let (tri, h) = self.tris[o.geometry].closest(accel, &local, wr, &mut tm, counter)?;
+                        best = Some((obj, tri, h.b1, h.b2));
+                        Some(tm)
                     }
                 }
             },
@@ -319,12 +408,7 @@ impl<'s, A: Accel> World<'s, A> {
                 Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).is_some(),
                 Geometry::Mesh(_) => {
                     let Some(accel) = self.blas[o.geometry].as_ref() else { return false };
-                    let tris = &self.tris[o.geometry];
-                    let wr = WatertightRay::new(local.o, local.d);
-                    accel.any(&local, tmax, |tri, tmx| {
-                        let [a, b, c] = tris[tri as usize];
-                        intersect_triangle(&wr, a, b, c, tmx).is_some()
-                    })
+                    self.tris[o.geometry].any(accel, &local, WatertightRay::new(local.o, local.d), tmax)
                 }
             }
         })

@@ -14,14 +14,18 @@ pub fn stderr(o: &Output) -> String {
 }
 
 /// The shared test data, from `SNELL_SCENES`. `None` (with a note) when the variable is not
-/// set; a panic when it is set but the file is missing, so CI fails loudly.
+/// set; a panic when it is set but the file is missing, so CI fails loudly. A relative path
+/// is relative to the workspace root.
 pub fn shared_scene(rel: &str) -> Option<PathBuf> {
     let Ok(root) = std::env::var("SNELL_SCENES") else {
         eprintln!("SNELL_SCENES is not set: skipping the test that needs {rel}");
         return None;
     };
-    let p = Path::new(&root).join(rel);
-    assert!(p.is_file(), "SNELL_SCENES={root} is set but {} is missing", p.display());
+    // A relative path is taken from the workspace root, where `cargo test` is run (the test
+    // process itself runs in the crate's directory).
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(root);
+    let p = root.join(rel);
+    assert!(p.is_file(), "SNELL_SCENES is set but {} is missing", p.display());
     Some(p)
 }
 

@@ -588,8 +588,117 @@ fn slab4(n: &Node4, r: &RayPre, t_max: f32) -> ([f32; 4], u32) {
 }
 
 impl Bvh {
-    fn leaf(&self, child: u32) -> &[u32] {
-        let (first, count) = self.leaves[(child & !LEAF) as usize];
+    /// Closest hit over whole leaves: `test(leaf, t_max)` returns the closest hit in the leaf.
+    #[inline(always)]
+    fn closest_leaves(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        let inv = ray.d.recip();
+        if self.root_box.slab(ray.o, inv, 0.0, *t_max).is_none() {
+            return false;
+        }
+        // A tree that is a single leaf starts at that leaf (one call site of `test`, so that
+        // it is inlined).
+        let root = if self.root_leaf {
+            LEAF
+        } else if self.nodes.is_empty() {
+            return false;
+        } else {
+            0
+        };
+        let mut hit = false;
+        let r = RayPre::new(ray, inv);
+        // Uninitialised: zeroing 1.5 KiB per ray showed up in profiles. Only entries below `sp`
+        // are read, and each was written first.
+        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
+        stack[0].write((root, 0.0));
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            // SAFETY: stack[sp] was written before sp was raised past it.
+            let (mut cur, t_enter) = unsafe { stack[sp].assume_init() };
+            if t_enter > *t_max {
+                continue;
+            }
+            loop {
+                if cur & LEAF != 0 {
+                    if let Some(t) = test(cur & !LEAF, *t_max) {
+                        *t_max = t;
+                        hit = true;
+                    }
+                    break;
+                }
+                counter.node();
+                let (k, refs, ts) = Self::hits(&self.nodes[cur as usize], &r, *t_max);
+                if k == 0 {
+                    break;
+                }
+                for j in 0..k - 1 {
+                    stack[sp].write((refs[j], ts[j]));
+                    sp += 1;
+                }
+                cur = refs[k - 1];
+            }
+        }
+        hit
+    }
+
+    /// Any hit over whole leaves: `test(leaf, t_max)` says whether the leaf blocks the ray.
+    #[inline(always)]
+    fn any_leaves(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        mut test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
+        let inv = ray.d.recip();
+        if self.root_box.slab(ray.o, inv, 0.0, t_max).is_none() {
+            return false;
+        }
+        let root = if self.root_leaf {
+            LEAF
+        } else if self.nodes.is_empty() {
+            return false;
+        } else {
+            0
+        };
+        let r = RayPre::new(ray, inv);
+        let mut stack = [std::mem::MaybeUninit::<u32>::uninit(); 3 * MAX_STACK];
+        stack[0].write(root);
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            // SAFETY: stack[sp] was written before sp was raised past it.
+            let mut cur = unsafe { stack[sp].assume_init() };
+            loop {
+                if cur & LEAF != 0 {
+                    if test(cur & !LEAF, t_max) {
+                        return true;
+                    }
+                    break;
+                }
+                counter.node();
+                let (k, refs, _) = Self::hits(&self.nodes[cur as usize], &r, t_max);
+                if k == 0 {
+                    break;
+                }
+                for &c in &refs[..k - 1] {
+                    stack[sp].write(c);
+                    sp += 1;
+                }
+                cur = refs[k - 1];
+            }
+        }
+        false
+    }
+
+    fn leaf(&self, leaf: u32) -> &[u32] {
+        let (first, count) = self.leaves[leaf as usize];
         &self.prims[first as usize..(first + count) as usize]
     }
 
@@ -686,59 +795,21 @@ impl Accel for Bvh {
         mut test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        let inv = ray.d.recip();
-        if self.root_box.slab(ray.o, inv, 0.0, *t_max).is_none() {
-            return false;
-        }
-        let mut hit = false;
-        if self.root_leaf {
-            for &p in self.leaf(LEAF) {
-                if let Some(t) = test(p, *t_max) {
-                    *t_max = t;
-                    hit = true;
-                }
-            }
-            return hit;
-        }
-        if self.nodes.is_empty() {
-            return false;
-        }
-        let r = RayPre::new(ray, inv);
-        // Uninitialised: zeroing 1.5 KiB per ray showed up in profiles. Only entries below `sp`
-        // are read, and each was written first.
-        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
-        stack[0].write((0, 0.0));
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            // SAFETY: stack[sp] was written before sp was raised past it.
-            let (mut cur, t_enter) = unsafe { stack[sp].assume_init() };
-            if t_enter > *t_max {
-                continue;
-            }
-            loop {
-                if cur & LEAF != 0 {
-                    for &p in self.leaf(cur) {
-                        if let Some(t) = test(p, *t_max) {
-                            *t_max = t;
-                            hit = true;
-                        }
+        self.closest_leaves(
+            ray,
+            t_max,
+            |leaf, mut tm| {
+                let mut best = None;
+                for &p in self.leaf(leaf) {
+                    if let Some(t) = test(p, tm) {
+                        tm = t;
+                        best = Some(t);
                     }
-                    break;
                 }
-                counter.node();
-                let (k, refs, ts) = Self::hits(&self.nodes[cur as usize], &r, *t_max);
-                if k == 0 {
-                    break;
-                }
-                for j in 0..k - 1 {
-                    stack[sp].write((refs[j], ts[j]));
-                    sp += 1;
-                }
-                cur = refs[k - 1];
-            }
-        }
-        hit
+                best
+            },
+            counter,
+        )
     }
 
     fn any_counted(
@@ -748,44 +819,25 @@ impl Accel for Bvh {
         mut test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        let inv = ray.d.recip();
-        if self.root_box.slab(ray.o, inv, 0.0, t_max).is_none() {
-            return false;
-        }
-        if self.root_leaf {
-            return self.leaf(LEAF).iter().any(|&p| test(p, t_max));
-        }
-        if self.nodes.is_empty() {
-            return false;
-        }
-        let r = RayPre::new(ray, inv);
-        let mut stack = [std::mem::MaybeUninit::<u32>::uninit(); 3 * MAX_STACK];
-        stack[0].write(0);
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            // SAFETY: stack[sp] was written before sp was raised past it.
-            let mut cur = unsafe { stack[sp].assume_init() };
-            loop {
-                if cur & LEAF != 0 {
-                    if self.leaf(cur).iter().any(|&p| test(p, t_max)) {
-                        return true;
-                    }
-                    break;
-                }
-                counter.node();
-                let (k, refs, _) = Self::hits(&self.nodes[cur as usize], &r, t_max);
-                if k == 0 {
-                    break;
-                }
-                for &c in &refs[..k - 1] {
-                    stack[sp].write(c);
-                    sp += 1;
-                }
-                cur = refs[k - 1];
-            }
-        }
-        false
+        self.any_leaves(ray, t_max, |leaf, tm| self.leaf(leaf).iter().any(|&p| test(p, tm)), counter)
+    }
+
+    fn leaves(&self) -> Option<Vec<&[u32]>> {
+        Some((0..self.leaves.len() as u32).map(|l| self.leaf(l)).collect())
+    }
+
+    fn closest_leaf_counted(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        self.closest_leaves(ray, t_max, test, counter)
+    }
+
+    fn any_leaf(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
+        self.any_leaves(ray, t_max, test, &super::NoCount)
     }
 
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {

@@ -71,6 +71,31 @@ pub trait Accel: Send + Sync + Sized {
     /// [`Accel::any`], reporting every node (or cell) visited to `counter`.
     fn any_counted(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool, counter: &impl Counter) -> bool;
 
+    /// The primitives of each leaf, indexed by leaf id, for structures that test a leaf's
+    /// primitives together (the BVHs). Callers may then lay out primitive data leaf by leaf and
+    /// use [`Accel::closest_leaf_counted`] / [`Accel::any_leaf`]. `None` (the default) means
+    /// each primitive is its own leaf: leaf id = primitive id.
+    fn leaves(&self) -> Option<Vec<&[u32]>> {
+        None
+    }
+
+    /// Closest hit, leaf at a time: `test(leaf, t_max)` tests all of a leaf's primitives and
+    /// returns the closest `t < t_max` among them. Leaf ids are those of [`Accel::leaves`].
+    fn closest_leaf_counted(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        self.closest_counted(ray, t_max, test, counter)
+    }
+
+    /// Any hit, leaf at a time (see [`Accel::closest_leaf_counted`]).
+    fn any_leaf(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
+        self.any(ray, t_max, test)
+    }
+
     /// Size and shape of the structure.
     fn stats(&self) -> AccelStats;
 

@@ -2,8 +2,10 @@
 
 mod mesh;
 mod sphere;
+mod tri4;
 mod triangle;
 
 pub use mesh::{Mesh, MeshError};
 pub use sphere::{intersect_sphere, Sphere};
+pub use tri4::{Ray4, Tri4};
 pub use triangle::{intersect_triangle, TriHit, WatertightRay};

@@ -42,6 +42,18 @@ impl WatertightRay {
         let d = d.to_array();
         WatertightRay { o, kx, ky, kz, sx: d[kx] / d[kz], sy: d[ky] / d[kz], sz: 1.0 / d[kz] }
     }
+
+    /// The permuted axes `[kx, ky, kz]`: `kz` is the dominant axis of the direction.
+    #[inline]
+    pub fn axes(&self) -> [usize; 3] {
+        [self.kx, self.ky, self.kz]
+    }
+
+    /// The shear constants `[sx, sy, sz]`.
+    #[inline]
+    pub fn shear(&self) -> [f32; 3] {
+        [self.sx, self.sy, self.sz]
+    }
 }
 
 /// A triangle hit: distance and barycentric coordinates of vertices 1 and 2
