@@ -131,7 +131,8 @@ fn measure<A: Accel>(
     let (_, blas) = w.structures();
     let stats = blas.first().and_then(|b| b.as_ref()).map(|b| b.stats()).unwrap_or_default();
     let (top, _) = w.structures();
-    let bytes = stats.bytes + top.stats().bytes;
+    // Like Embree's figure: the structures and the triangle data their leaves point to.
+    let bytes = stats.bytes + top.stats().bytes + w.triangle_bytes();
     work.iter()
         .map(|(name, rays)| {
             let rays = subset(rays, kind, w.scene.triangle_count());

@@ -204,18 +204,30 @@ impl TriData {
         let Some(leaves) = accel.leaves() else {
             return TriData::Single((0..m.indices.len()).map(|i| m.triangle(i)).collect());
         };
-        let mut blocks = Vec::new();
+        use rayon::prelude::*;
+        let mut start = 0u32;
         let ranges = leaves
             .iter()
             .map(|prims| {
-                let start = blocks.len() as u32;
-                for chunk in prims.chunks(4) {
-                    let tris: Vec<(u32, [Vec3; 3])> = chunk.iter().map(|&p| (p, m.triangle(p as usize))).collect();
-                    blocks.push(Tri4::pack(&tris));
-                }
-                (start, blocks.len() as u32)
+                let r = (start, start + prims.len().div_ceil(4) as u32);
+                start = r.1;
+                r
             })
             .collect();
+        // Each leaf fills its own slice of the blocks, in parallel.
+        let mut blocks = vec![Tri4::pack([]); start as usize];
+        let mut slices = Vec::with_capacity(leaves.len());
+        let mut rest = blocks.as_mut_slice();
+        for prims in &leaves {
+            let (mine, tail) = rest.split_at_mut(prims.len().div_ceil(4));
+            slices.push(mine);
+            rest = tail;
+        }
+        slices.into_par_iter().zip(leaves.par_iter()).for_each(|(out, prims)| {
+            for (b, c) in out.iter_mut().zip(prims.chunks(4)) {
+                *b = Tri4::pack(c.iter().map(|&p| (p, m.triangle(p as usize))));
+            }
+        });
         TriData::Leaves { blocks, ranges }
     }
 
@@ -342,6 +354,20 @@ impl<'s, A: Accel> World<'s, A> {
             }
         }
         World { scene, top, blas, tris, lights }
+    }
+
+    /// Bytes of triangle data laid out for the bottom-level structures (blocks of four, or one
+    /// record per triangle), which traversal reads besides the structures themselves.
+    pub fn triangle_bytes(&self) -> usize {
+        self.tris
+            .iter()
+            .map(|t| match t {
+                TriData::Leaves { blocks, ranges } => {
+                    blocks.len() * std::mem::size_of::<Tri4>() + ranges.len() * std::mem::size_of::<(u32, u32)>()
+                }
+                TriData::Single(t) => t.len() * std::mem::size_of::<[Vec3; 3]>(),
+            })
+            .sum()
     }
 
     /// The top-level structure and the bottom-level one of each geometry (None for spheres).

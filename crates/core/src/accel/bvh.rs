@@ -12,6 +12,7 @@
 
 use super::{Accel, AccelParams, AccelStats, BvhParams, Counter};
 use crate::geometry::{Aabb, Ray};
+use glam::Vec3A;
 
 /// How a node's primitives are divided between its two children.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -107,11 +108,11 @@ impl SpatialBuilder<'_> {
             }
             let scale = BINS as f32 / ext;
             let bin = |r: &Ref| (((r.b.center()[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1);
-            let mut bb = [Aabb::EMPTY; BINS];
+            let mut bb = Bins::<BINS>::new();
             let mut bn = [0usize; BINS];
             for r in &refs {
                 let k = bin(r);
-                bb[k] = bb[k].union(r.b);
+                bb.grow_box(k, r.b);
                 bn[k] += 1;
             }
             if let Some((cost, k, lb, rb)) = sah_sweep(&bb, &bn, &bn) {
@@ -133,7 +134,7 @@ impl SpatialBuilder<'_> {
                 }
                 let w = ext / SPATIAL_BINS as f32;
                 let bin = |x: f32| (((x - lo) / w) as usize).min(SPATIAL_BINS - 1);
-                let mut bb = [Aabb::EMPTY; SPATIAL_BINS];
+                let mut bb = Bins::<SPATIAL_BINS>::new();
                 let mut enter = [0usize; SPATIAL_BINS];
                 let mut exit = [0usize; SPATIAL_BINS];
                 for r in &refs {
@@ -143,10 +144,10 @@ impl SpatialBuilder<'_> {
                     let mut part = r.b;
                     for k in b0..b1 {
                         let (l, rest) = (self.clip)(r.prim, &part, axis, lo + (k + 1) as f32 * w);
-                        bb[k] = bb[k].union(l);
+                        bb.grow_box(k, l);
                         part = rest;
                     }
-                    bb[b1] = bb[b1].union(part);
+                    bb.grow_box(b1, part);
                 }
                 if let Some((cost, k, _, _)) = sah_sweep(&bb, &enter, &exit) {
                     if cost < best_s.0 {
@@ -267,34 +268,67 @@ pub struct Bvh {
 /// Deepest tree traversal supports (the build clamps `max_depth` to it).
 const MAX_STACK: usize = 64;
 const BINS: usize = 16;
+const _: () = assert!(BINS.is_power_of_two(), "bin_indices masks with BINS - 1");
 
 /// The binary builder. It only reads shared data, so subtrees build in parallel.
 ///
 /// Binary layout: depth first. An interior node's left child is the next node; `first` holds
 /// the index of its right child.
-struct Builder<'a> {
-    boxes: &'a [Aabb],
-    /// Box centres as arrays: indexing a glam vector by a run-time axis is a `match`.
-    centroids: Vec<[f32; 3]>,
+struct Builder {
     params: AccelParams,
     split: SplitMethod,
-    /// Morton code per primitive (only for [`SplitMethod::Morton`]).
-    codes: Vec<u32>,
+}
+
+/// A primitive reference of the builder: its box, id and Morton code in one 32-byte record,
+/// so that binning and partitioning stream through memory instead of gathering by index.
+#[derive(Clone, Copy, Debug)]
+#[repr(C)]
+struct PRef {
+    min: [f32; 3],
+    id: u32,
+    max: [f32; 3],
+    /// Morton code of the centre (only for [`SplitMethod::Morton`]).
+    code: u32,
+}
+
+impl PRef {
+    /// Centre on `axis` (the same arithmetic as [`Aabb::center`]).
+    #[inline(always)]
+    fn c(&self, axis: usize) -> f32 {
+        (self.min[axis] + self.max[axis]) * 0.5
+    }
+
+    #[inline(always)]
+    fn aabb(&self) -> Aabb {
+        Aabb { min: self.min.into(), max: self.max.into() }
+    }
 }
 
 /// Subtrees with more primitives than this are built as separate tasks.
 const PARALLEL_BUILD_MIN: usize = 16 * 1024;
 
-impl Builder<'_> {
-    fn bounds(&self, prims: &[u32]) -> (Aabb, Aabb) {
-        prims.iter().fold((Aabb::EMPTY, Aabb::EMPTY), |(b, c), &p| {
-            (b.union(self.boxes[p as usize]), c.grow(self.centroids[p as usize].into()))
-        })
+impl Builder {
+    /// Bounds of the boxes and of their centres.
+    fn bounds(&self, prims: &[PRef]) -> (Aabb, Aabb) {
+        let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        let (mut clo, mut chi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        for p in prims {
+            let (pmin, pmax) = (Vec3A::from_array(p.min), Vec3A::from_array(p.max));
+            let c = (pmin + pmax) * 0.5;
+            lo = lo.min(pmin);
+            hi = hi.max(pmax);
+            clo = clo.min(c);
+            chi = chi.max(c);
+        }
+        if prims.is_empty() {
+            return (Aabb::EMPTY, Aabb::EMPTY);
+        }
+        (Aabb { min: lo.into(), max: hi.into() }, Aabb { min: clo.into(), max: chi.into() })
     }
 
     /// Appends the subtree over `prims` (which sit at `offset` in the final primitive array)
     /// to `out`, depth first, with node indices relative to `base + out.len()`.
-    fn build_into(&self, out: &mut Vec<Node>, base: usize, prims: &mut [u32], offset: usize, depth: usize) {
+    fn build_into(&self, out: &mut Vec<Node>, base: usize, prims: &mut [PRef], offset: usize, depth: usize) {
         let (bounds, cbounds) = self.bounds(prims);
         let n = prims.len();
         let me = out.len();
@@ -321,20 +355,19 @@ impl Builder<'_> {
     }
 
     /// A subtree in its own vector, indices relative to its start.
-    fn subtree(&self, prims: &mut [u32], offset: usize, depth: usize) -> Vec<Node> {
+    fn subtree(&self, prims: &mut [PRef], offset: usize, depth: usize) -> Vec<Node> {
         let mut v = Vec::with_capacity(2 * prims.len() / self.params.max_leaf_prims + 1);
         self.build_into(&mut v, 0, prims, offset, depth);
         v
     }
 
     /// Reorders `prims` and returns the split index, always in `1..n`.
-    fn partition(&self, prims: &mut [u32], cbounds: &Aabb) -> usize {
+    fn partition(&self, prims: &mut [PRef], cbounds: &Aabb) -> usize {
         let n = prims.len();
         if self.split == SplitMethod::Morton {
             return self.morton_partition(prims);
         }
         let axis = cbounds.largest_axis();
-        let c = &self.centroids;
         if cbounds.extent()[axis] <= 0.0 {
             // All centroids coincide: no plane separates them; split the list in half.
             return n / 2;
@@ -342,14 +375,14 @@ impl Builder<'_> {
         let mid = match self.split {
             SplitMethod::Center => {
                 let plane = cbounds.center()[axis];
-                partition_in_place(prims, |p| c[p as usize][axis] < plane)
+                partition_in_place(prims, |p| p.c(axis) < plane)
             }
             SplitMethod::Median => n / 2,
             SplitMethod::Sah => return self.sah_partition(prims, cbounds),
             SplitMethod::Morton | SplitMethod::Spatial => unreachable!("handled elsewhere"),
         };
         if mid == 0 || mid == n || self.split == SplitMethod::Median {
-            prims.select_nth_unstable_by(n / 2, |&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]));
+            prims.select_nth_unstable_by(n / 2, |a, b| a.c(axis).total_cmp(&b.c(axis)));
             return n / 2;
         }
         mid
@@ -357,36 +390,44 @@ impl Builder<'_> {
 
     /// `prims` is sorted by Morton code: split where the highest bit in which the first and
     /// last codes differ turns from 0 to 1 (in the middle if all codes are equal).
-    fn morton_partition(&self, prims: &[u32]) -> usize {
+    fn morton_partition(&self, prims: &[PRef]) -> usize {
         let n = prims.len();
-        let (first, last) = (self.codes[prims[0] as usize], self.codes[prims[n - 1] as usize]);
+        let (first, last) = (prims[0].code, prims[n - 1].code);
         if first == last {
             return n / 2;
         }
         let bit = 31 - (first ^ last).leading_zeros();
-        let mid = prims.partition_point(|&p| self.codes[p as usize] & (1 << bit) == 0);
+        let mid = prims.partition_point(|p| p.code & (1 << bit) == 0);
         mid.clamp(1, n - 1)
     }
 
     #[allow(clippy::needless_range_loop)]
-    fn sah_partition(&self, prims: &mut [u32], cbounds: &Aabb) -> usize {
-        let c = &self.centroids;
+    fn sah_partition(&self, prims: &mut [PRef], cbounds: &Aabb) -> usize {
         let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, bins on the left
+                                                        // One pass over the primitives bins all three axes (each primitive's box is gathered
+                                                        // once, not three times).
+        let lo = cbounds.min.to_array();
+        let ext = cbounds.extent().to_array();
+        let scale = ext.map(|e| if e > 0.0 { BINS as f32 / e } else { 0.0 });
+        let (lo_v, scale_v) = (Vec3A::from_array(lo), Vec3A::from_array(scale));
+        let mut bins = [Bins::<BINS>::new(), Bins::new(), Bins::new()];
+        let mut bin_n = [[0usize; BINS]; 3];
+        for p in prims.iter() {
+            let (pmin, pmax) = (Vec3A::from_array(p.min), Vec3A::from_array(p.max));
+            // The arithmetic of `PRef::c`, three axes at once.
+            let f = (((pmin + pmax) * 0.5 - lo_v) * scale_v).max(Vec3A::ZERO).min(Vec3A::splat((BINS - 1) as f32));
+            let f = bin_indices(f);
+            for axis in 0..3 {
+                let b = f[axis];
+                bin_n[axis][b] += 1;
+                bins[axis].grow(b, pmin, pmax);
+            }
+        }
         for axis in 0..3 {
-            let lo = cbounds.min[axis];
-            let ext = cbounds.extent()[axis];
-            if ext <= 0.0 {
+            if ext[axis] <= 0.0 {
                 continue;
             }
-            let scale = BINS as f32 / ext;
-            let mut bin_box = [Aabb::EMPTY; BINS];
-            let mut bin_n = [0usize; BINS];
-            for &p in prims.iter() {
-                let b = (((c[p as usize][axis] - lo) * scale) as usize).min(BINS - 1);
-                bin_n[b] += 1;
-                bin_box[b] = bin_box[b].union(self.boxes[p as usize]);
-            }
-            if let Some((cost, k, _, _)) = sah_sweep(&bin_box, &bin_n, &bin_n) {
+            if let Some((cost, k, _, _)) = sah_sweep(&bins[axis], &bin_n[axis], &bin_n[axis]) {
                 if cost < best.0 {
                     best = (cost, axis, k);
                 }
@@ -399,14 +440,77 @@ impl Builder<'_> {
         let (_, axis, split_bin) = best;
         let lo = cbounds.min[axis];
         let scale = BINS as f32 / cbounds.extent()[axis];
-        let mid =
-            partition_in_place(prims, |p| (((c[p as usize][axis] - lo) * scale) as usize).min(BINS - 1) < split_bin);
+        let mid = partition_in_place(prims, |p| (p.c(axis) - lo) * scale < split_bin as f32);
         if mid == 0 || mid == n {
             n / 2
         } else {
             mid
         }
     }
+}
+
+/// Bin boxes for the SAH sweeps, as SIMD vectors (a union is one `min` and one `max`).
+struct Bins<const N: usize> {
+    min: [Vec3A; N],
+    max: [Vec3A; N],
+}
+
+impl<const N: usize> Bins<N> {
+    fn new() -> Self {
+        Bins { min: [Vec3A::INFINITY; N], max: [Vec3A::NEG_INFINITY; N] }
+    }
+
+    #[inline(always)]
+    fn grow(&mut self, k: usize, min: Vec3A, max: Vec3A) {
+        self.min[k] = self.min[k].min(min);
+        self.max[k] = self.max[k].max(max);
+    }
+
+    #[inline(always)]
+    fn grow_box(&mut self, k: usize, b: Aabb) {
+        self.grow(k, b.min.into(), b.max.into());
+    }
+
+    /// Union of bins `range`, as an [`Aabb`].
+    fn union(&self, range: std::ops::Range<usize>) -> Aabb {
+        let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        for k in range {
+            lo = lo.min(self.min[k]);
+            hi = hi.max(self.max[k]);
+        }
+        if lo.cmpgt(hi).any() {
+            Aabb::EMPTY
+        } else {
+            Aabb { min: lo.into(), max: hi.into() }
+        }
+    }
+}
+
+/// Truncates three bin positions, already clamped to `[0, BINS - 1]`, to indices.
+#[inline(always)]
+fn bin_indices(f: Vec3A) -> [usize; 3] {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: SSE2 is part of the x86_64 baseline; the store goes to a local array.
+    unsafe {
+        use std::arch::x86_64::*;
+        let mut out = [0i32; 4];
+        _mm_storeu_si128(out.as_mut_ptr().cast(), _mm_cvttps_epi32(f.into()));
+        [out[0] as usize & (BINS - 1), out[1] as usize & (BINS - 1), out[2] as usize & (BINS - 1)]
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        [f.x as usize, f.y as usize, f.z as usize]
+    }
+}
+
+/// Half surface area of the box `(lo, hi)`; 0 if it is empty.
+#[inline(always)]
+fn half_area(lo: Vec3A, hi: Vec3A) -> f32 {
+    let e = hi - lo;
+    if e.x < 0.0 {
+        return 0.0;
+    }
+    e.x * e.y + e.y * e.z + e.z * e.x
 }
 
 /// The SAH sweep over `N` bins: the best plane between two bins, as the index `k` of the first
@@ -416,32 +520,38 @@ impl Builder<'_> {
 /// Returns `(cost, k, left box, right box)` with cost `A(L)·nL + A(R)·nR` (half areas), or
 /// `None` if no plane has references on both sides.
 fn sah_sweep<const N: usize>(
-    boxes: &[Aabb; N],
+    bins: &Bins<N>,
     starts: &[usize; N],
     ends: &[usize; N],
 ) -> Option<(f32, usize, Aabb, Aabb)> {
-    let mut right = [(Aabb::EMPTY, 0usize); N];
-    let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+    // Right-hand sides as areas and counts only; the winning split's boxes are rebuilt once.
+    let mut right_area = [0.0f32; N];
+    let mut right_n = [0usize; N];
+    let (mut lo, mut hi, mut cnt) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY, 0);
     for k in (1..N).rev() {
-        acc = acc.union(boxes[k]);
+        lo = lo.min(bins.min[k]);
+        hi = hi.max(bins.max[k]);
         cnt += ends[k];
-        right[k] = (acc, cnt);
+        right_area[k] = half_area(lo, hi);
+        right_n[k] = cnt;
     }
-    let mut best: Option<(f32, usize, Aabb, Aabb)> = None;
-    let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+    let mut best: Option<(f32, usize)> = None;
+    let (mut lo, mut hi, mut cnt) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY, 0);
     for k in 0..N - 1 {
-        acc = acc.union(boxes[k]);
+        lo = lo.min(bins.min[k]);
+        hi = hi.max(bins.max[k]);
         cnt += starts[k];
-        let (rb, rn) = right[k + 1];
+        let rn = right_n[k + 1];
         if cnt == 0 || rn == 0 {
             continue;
         }
-        let cost = acc.half_area() * cnt as f32 + rb.half_area() * rn as f32;
+        let cost = half_area(lo, hi) * cnt as f32 + right_area[k + 1] * rn as f32;
         if best.is_none_or(|b| cost < b.0) {
-            best = Some((cost, k + 1, acc, rb));
+            best = Some((cost, k + 1));
         }
     }
-    best
+    let (cost, k) = best?;
+    Some((cost, k, bins.union(0..k), bins.union(k..N)))
 }
 
 /// Appends `sub` (indices relative to its start) to `out`, moving it to start at `at`.
@@ -450,10 +560,10 @@ fn append_relocated(out: &mut Vec<Node>, sub: &[Node], at: usize) {
 }
 
 /// Moves the elements satisfying `pred` to the front; returns how many there are.
-fn partition_in_place(v: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
+fn partition_in_place<T>(v: &mut [T], pred: impl Fn(&T) -> bool) -> usize {
     let mut i = 0;
     for j in 0..v.len() {
-        if pred(v[j]) {
+        if pred(&v[j]) {
             v.swap(i, j);
             i += 1;
         }
@@ -530,8 +640,8 @@ struct RayPre {
 impl RayPre {
     #[inline]
     fn new(ray: &Ray, inv: glam::Vec3) -> RayPre {
-        let near = [0, 1, 2].map(|a| if inv[a] < 0.0 { 3 + a } else { a });
-        RayPre { o: ray.o.to_array(), inv: inv.to_array(), near, far: near.map(|n| if n >= 3 { n - 3 } else { n + 3 }) }
+        let (nx, ny, nz) = ((inv.x < 0.0) as usize * 3, (inv.y < 0.0) as usize * 3, (inv.z < 0.0) as usize * 3);
+        RayPre { o: ray.o.to_array(), inv: inv.to_array(), near: [nx, 1 + ny, 2 + nz], far: [3 - nx, 4 - ny, 5 - nz] }
     }
 }
 
@@ -587,6 +697,59 @@ fn slab4(n: &Node4, r: &RayPre, t_max: f32) -> ([f32; 4], u32) {
     }
 }
 
+/// Visits interior node `n`: pushes the children hit within `t_max` onto the stack, farthest
+/// deepest, except the nearest, which is returned (`None`: no child is hit). The one- and
+/// two-child cases, by far the most common, take no loop.
+#[inline(always)]
+fn visit(
+    n: &Node4,
+    r: &RayPre,
+    t_max: f32,
+    stack: &mut [std::mem::MaybeUninit<(u32, f32)>],
+    sp: &mut usize,
+) -> Option<u32> {
+    let (t, mask) = slab4(n, r, t_max);
+    if mask == 0 {
+        return None;
+    }
+    let j0 = mask.trailing_zeros() as usize;
+    let rest = mask & (mask - 1);
+    if rest == 0 {
+        return Some(n.child[j0]);
+    }
+    let j1 = rest.trailing_zeros() as usize;
+    let rest = rest & (rest - 1);
+    if rest == 0 {
+        let (near, far) = if t[j0] < t[j1] { (j0, j1) } else { (j1, j0) };
+        stack[*sp].write((n.child[far], t[far]));
+        *sp += 1;
+        return Some(n.child[near]);
+    }
+    // Three or four: insertion sort by descending distance (ties: later child nearer).
+    let mut refs = [0u32; 4];
+    let mut ts = [0.0f32; 4];
+    let mut k = 0;
+    let mut m = mask;
+    while m != 0 {
+        let j = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let mut p = k;
+        while p > 0 && ts[p - 1] < t[j] {
+            ts[p] = ts[p - 1];
+            refs[p] = refs[p - 1];
+            p -= 1;
+        }
+        ts[p] = t[j];
+        refs[p] = n.child[j];
+        k += 1;
+    }
+    for j in 0..k - 1 {
+        stack[*sp].write((refs[j], ts[j]));
+        *sp += 1;
+    }
+    Some(refs[k - 1])
+}
+
 impl Bvh {
     /// Closest hit over whole leaves: `test(leaf, t_max)` returns the closest hit in the leaf.
     #[inline(always)]
@@ -633,15 +796,10 @@ impl Bvh {
                     break;
                 }
                 counter.node();
-                let (k, refs, ts) = Self::hits(&self.nodes[cur as usize], &r, *t_max);
-                if k == 0 {
-                    break;
+                match visit(&self.nodes[cur as usize], &r, *t_max, &mut stack, &mut sp) {
+                    Some(next) => cur = next,
+                    None => break,
                 }
-                for j in 0..k - 1 {
-                    stack[sp].write((refs[j], ts[j]));
-                    sp += 1;
-                }
-                cur = refs[k - 1];
             }
         }
         hit
@@ -668,13 +826,13 @@ impl Bvh {
             0
         };
         let r = RayPre::new(ray, inv);
-        let mut stack = [std::mem::MaybeUninit::<u32>::uninit(); 3 * MAX_STACK];
-        stack[0].write(root);
+        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
+        stack[0].write((root, 0.0));
         let mut sp = 1usize;
         while sp > 0 {
             sp -= 1;
             // SAFETY: stack[sp] was written before sp was raised past it.
-            let mut cur = unsafe { stack[sp].assume_init() };
+            let (mut cur, _) = unsafe { stack[sp].assume_init() };
             loop {
                 if cur & LEAF != 0 {
                     if test(cur & !LEAF, t_max) {
@@ -683,15 +841,10 @@ impl Bvh {
                     break;
                 }
                 counter.node();
-                let (k, refs, _) = Self::hits(&self.nodes[cur as usize], &r, t_max);
-                if k == 0 {
-                    break;
+                match visit(&self.nodes[cur as usize], &r, t_max, &mut stack, &mut sp) {
+                    Some(next) => cur = next,
+                    None => break,
                 }
-                for &c in &refs[..k - 1] {
-                    stack[sp].write(c);
-                    sp += 1;
-                }
-                cur = refs[k - 1];
             }
         }
         false
@@ -700,30 +853,6 @@ impl Bvh {
     fn leaf(&self, leaf: u32) -> &[u32] {
         let (first, count) = self.leaves[leaf as usize];
         &self.prims[first as usize..(first + count) as usize]
-    }
-
-    /// The children of `n` hit within `t_max`, nearest last: `(count, refs, distances)`.
-    #[inline(always)]
-    fn hits(n: &Node4, r: &RayPre, t_max: f32) -> (usize, [u32; 4], [f32; 4]) {
-        let (t, mut mask) = slab4(n, r, t_max);
-        let mut refs = [0u32; 4];
-        let mut ts = [0.0f32; 4];
-        let mut k = 0;
-        while mask != 0 {
-            let j = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            // Insertion sort, descending distance.
-            let mut p = k;
-            while p > 0 && ts[p - 1] < t[j] {
-                ts[p] = ts[p - 1];
-                refs[p] = refs[p - 1];
-                p -= 1;
-            }
-            ts[p] = t[j];
-            refs[p] = n.child[j];
-            k += 1;
-        }
-        (k, refs, ts)
     }
 }
 
@@ -739,16 +868,7 @@ impl Accel for Bvh {
         let mut base = params.base;
         base.max_depth = base.max_depth.min(MAX_STACK - 1);
         base.max_leaf_prims = base.max_leaf_prims.max(1);
-        let centroids: Vec<[f32; 3]> = boxes.iter().map(|b| b.center().to_array()).collect();
-        let codes = if params.split == SplitMethod::Morton {
-            let cb = prims.iter().fold(Aabb::EMPTY, |b, &p| b.grow(centroids[p as usize].into()));
-            let codes: Vec<u32> = centroids.iter().map(|c| morton((*c).into(), &cb)).collect();
-            prims.sort_unstable_by_key(|&p| (codes[p as usize], p));
-            codes
-        } else {
-            Vec::new()
-        };
-        let b = Builder { boxes, centroids, params: base, split: params.split, codes };
+        let b = Builder { params: base, split: params.split };
         let bin = if prims.is_empty() {
             Vec::new()
         } else if params.split == SplitMethod::Spatial {
@@ -764,7 +884,23 @@ impl Accel for Bvh {
             prims = refs;
             nodes
         } else {
-            b.subtree(&mut prims, 0, 0)
+            let mut refs: Vec<PRef> = prims
+                .iter()
+                .map(|&p| {
+                    let pb = boxes[p as usize];
+                    PRef { min: pb.min.to_array(), id: p, max: pb.max.to_array(), code: 0 }
+                })
+                .collect();
+            if params.split == SplitMethod::Morton {
+                let cb = refs.iter().fold(Aabb::EMPTY, |b, r| b.grow(r.aabb().center()));
+                for r in &mut refs {
+                    r.code = morton(r.aabb().center(), &cb);
+                }
+                refs.sort_unstable_by_key(|r| (r.code, r.id));
+            }
+            let nodes = b.subtree(&mut refs, 0, 0);
+            prims = refs.iter().map(|r| r.id).collect();
+            nodes
         };
         let max_depth_seen = binary_depth(&bin);
         let sah_cost = binary_sah_cost(&bin, &base);

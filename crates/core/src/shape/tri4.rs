@@ -35,8 +35,8 @@ impl Ray4 {
     pub fn new(ray: WatertightRay) -> Ray4 {
         let k = ray.axes();
         let o = ray.o.to_array();
-        let s = ray.shear();
-        Ray4 { ray, o: k.map(|a| [o[a]; 4]), s: s.map(|x| [x; 4]), k }
+        let [sx, sy, sz] = ray.shear();
+        Ray4 { ray, o: [[o[k[0]]; 4], [o[k[1]]; 4], [o[k[2]]; 4]], s: [[sx; 4], [sy; 4], [sz; 4]], k }
     }
 }
 
@@ -44,11 +44,11 @@ impl Tri4 {
     pub const NONE: u32 = u32::MAX;
 
     /// Packs up to four triangles `(index, corners)`.
-    pub fn pack(tris: &[(u32, [Vec3; 3])]) -> Tri4 {
-        assert!(tris.len() <= 4, "a block holds at most four triangles");
+    pub fn pack(tris: impl IntoIterator<Item = (u32, [Vec3; 3])>) -> Tri4 {
         let mut b = Tri4 { v: [[[f32::NAN; 4]; 3]; 3], id: [Tri4::NONE; 4] };
-        for (lane, (id, p)) in tris.iter().enumerate() {
-            b.id[lane] = *id;
+        for (lane, (id, p)) in tris.into_iter().enumerate() {
+            assert!(lane < 4, "a block holds at most four triangles");
+            b.id[lane] = id;
             for (vtx, c) in p.iter().enumerate() {
                 for axis in 0..3 {
                     b.v[vtx][axis][lane] = c[axis];
@@ -231,7 +231,7 @@ mod tests {
                     (i as u32 * 3 + 1, p)
                 })
                 .collect();
-            let block = Tri4::pack(&tris);
+            let block = Tri4::pack(tris.iter().copied());
             assert_eq!(block.len(), n);
             let o = random_point(&mut rng, 6.0);
             let target = if case % 5 == 0 { shared } else { random_point(&mut rng, 1.0) };
@@ -260,7 +260,7 @@ mod tests {
 
     #[test]
     fn unused_lanes_never_hit() {
-        let block = Tri4::pack(&[]);
+        let block = Tri4::pack([]);
         assert!(block.is_empty());
         let r = Ray4::new(WatertightRay::new(Vec3::new(0.0, 0.0, 1.0), -Vec3::Z));
         assert!(block.closest(&r, f32::INFINITY).is_none());
