@@ -392,39 +392,42 @@ impl<'s, A: Accel> World<'s, A> {
         // (object, primitive, b1, b2)
         let mut best: Option<(u32, u32, f32, f32)> = None;
         let mut t = t_max;
-        self.top.closest_counted(
-            ray,
-            &mut t,
-            |obj, tmax| {
-                counter.prim();
-                let o = &self.scene.objects[obj as usize];
-                let local = match &o.transform {
-                    Some(x) => x.ray_to_object(ray),
-                    None => *ray,
-                };
-                match &self.scene.geometries[o.geometry] {
-                    Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
-                        best = Some((obj, 0, 0.0, 0.0));
-                    }),
-                    Geometry::Mesh(_) => {
-                        let accel = self.blas[o.geometry].as_ref()?;
-                        let wr = WatertightRay::new(local.o, local.d);
-                        let mut tm = tmax;
-                        let (tri, h) = self.tris[o.geometry].closest(accel, &local, wr, &mut tm, counter)?;
-                        best = Some((obj, tri, h.b1, h.b2));
-                        Some(tm)
-                    }
+        let mut test = |obj: u32, tmax: f32| {
+            counter.prim();
+            let o = &self.scene.objects[obj as usize];
+            let local = match &o.transform {
+                Some(x) => x.ray_to_object(ray),
+                None => *ray,
+            };
+            match &self.scene.geometries[o.geometry] {
+                Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
+                    best = Some((obj, 0, 0.0, 0.0));
+                }),
+                Geometry::Mesh(_) => {
+                    let accel = self.blas[o.geometry].as_ref()?;
+                    let wr = WatertightRay::new(local.o, local.d);
+                    let mut tm = tmax;
+                    let (tri, h) = self.tris[o.geometry].closest(accel, &local, wr, &mut tm, counter)?;
+                    best = Some((obj, tri, h.b1, h.b2));
+                    Some(tm)
                 }
-            },
-            counter,
-        );
+            }
+        };
+        if self.scene.objects.len() == 1 {
+            // One object: its own structure culls as well as a top level would.
+            if let Some(hit_t) = test(0, t) {
+                t = hit_t;
+            }
+        } else {
+            self.top.closest_counted(ray, &mut t, test, counter);
+        }
         let (object, prim, b1, b2) = best?;
         Some(RawHit { t, object, prim, b1, b2 })
     }
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
-        self.top.any(ray, t_max, |obj, tmax| {
+        let test = |obj: u32, tmax: f32| {
             let o = &self.scene.objects[obj as usize];
             let local = match &o.transform {
                 Some(x) => x.ray_to_object(ray),
@@ -437,7 +440,12 @@ impl<'s, A: Accel> World<'s, A> {
                     self.tris[o.geometry].any(accel, &local, WatertightRay::new(local.o, local.d), tmax)
                 }
             }
-        })
+        };
+        if self.scene.objects.len() == 1 {
+            test(0, t_max)
+        } else {
+            self.top.any(ray, t_max, test)
+        }
     }
 
     fn interaction(&self, ray: &Ray, t: f32, obj: u32, prim: u32, b1: f32, b2: f32) -> Intersection {

@@ -317,6 +317,9 @@ fn heat_map_and_box_overlay_from_the_cli() {
             "1",
             "--show-boxes",
             "1",
+            // The median split always divides 8 triangles (the SAH keeps them in one leaf).
+            "--accel",
+            "bvh-median",
         ],
         dir.path(),
     );

@@ -3,7 +3,9 @@
 //! Every primitive goes to exactly one child, chosen by its box centre; a primitive that
 //! straddles the split plane therefore lands on one side and grows that child's box (so
 //! sibling boxes may overlap, which is what makes a BVH a BVH rather than a k-d tree).
-//! Recursion stops at `max_leaf_prims` primitives or at depth `max_depth` (24 by default).
+//! Recursion stops at `max_leaf_prims` primitives or at depth `max_depth` (24 by default); the
+//! SAH split also stops at up to [`SAH_LEAF_MAX`] primitives where a leaf is cheaper than any
+//! split (leaf triangles are tested four at a time, see [`crate::shape::Tri4`]).
 //!
 //! Build layout ≠ traversal layout (as in tinybvh): the builder makes a binary tree of 32-byte
 //! nodes, which is then collapsed into a 4-wide tree whose nodes hold the boxes of their four
@@ -268,6 +270,9 @@ pub struct Bvh {
 /// Deepest tree traversal supports (the build clamps `max_depth` to it).
 const MAX_STACK: usize = 64;
 const BINS: usize = 16;
+/// The SAH may make leaves of up to this many primitives (two blocks of four triangles) where a
+/// split would cost more; below `max_leaf_prims` every node is a leaf.
+const SAH_LEAF_MAX: usize = 8;
 const _: () = assert!(BINS.is_power_of_two(), "bin_indices masks with BINS - 1");
 
 /// The binary builder. It only reads shared data, so subtrees build in parallel.
@@ -336,7 +341,10 @@ impl Builder {
         if n <= self.params.max_leaf_prims || depth >= self.params.max_depth {
             return;
         }
-        let mid = self.partition(prims, &cbounds);
+        let mid = self.partition(prims, &bounds, &cbounds);
+        if mid == 0 {
+            return; // the SAH prefers a leaf
+        }
         let (l, r) = prims.split_at_mut(mid);
         if n >= PARALLEL_BUILD_MIN {
             let (ln, rn) =
@@ -361,8 +369,8 @@ impl Builder {
         v
     }
 
-    /// Reorders `prims` and returns the split index, always in `1..n`.
-    fn partition(&self, prims: &mut [PRef], cbounds: &Aabb) -> usize {
+    /// Reorders `prims` and returns the split index, in `1..n`, or 0 for "make a leaf".
+    fn partition(&self, prims: &mut [PRef], bounds: &Aabb, cbounds: &Aabb) -> usize {
         let n = prims.len();
         if self.split == SplitMethod::Morton {
             return self.morton_partition(prims);
@@ -378,7 +386,7 @@ impl Builder {
                 partition_in_place(prims, |p| p.c(axis) < plane)
             }
             SplitMethod::Median => n / 2,
-            SplitMethod::Sah => return self.sah_partition(prims, cbounds),
+            SplitMethod::Sah => return self.sah_partition(prims, bounds, cbounds),
             SplitMethod::Morton | SplitMethod::Spatial => unreachable!("handled elsewhere"),
         };
         if mid == 0 || mid == n || self.split == SplitMethod::Median {
@@ -402,10 +410,9 @@ impl Builder {
     }
 
     #[allow(clippy::needless_range_loop)]
-    fn sah_partition(&self, prims: &mut [PRef], cbounds: &Aabb) -> usize {
-        let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, bins on the left
-                                                        // One pass over the primitives bins all three axes (each primitive's box is gathered
-                                                        // once, not three times).
+    fn sah_partition(&self, prims: &mut [PRef], bounds: &Aabb, cbounds: &Aabb) -> usize {
+        // (cost, axis, bins on the left). One pass over the primitives bins all three axes.
+        let mut best = (f32::INFINITY, 0usize, 0usize);
         let lo = cbounds.min.to_array();
         let ext = cbounds.extent().to_array();
         let scale = ext.map(|e| if e > 0.0 { BINS as f32 / e } else { 0.0 });
@@ -437,7 +444,17 @@ impl Builder {
         if !best.0.is_finite() {
             return n / 2;
         }
-        let (_, axis, split_bin) = best;
+        let (cost, axis, split_bin) = best;
+        // SAH termination for small nodes: a leaf when testing its primitives costs less than
+        // a split (traversal step plus the children's expected tests). Leaf triangles are
+        // tested four at a time, so a leaf costs one test per block of four.
+        if n <= SAH_LEAF_MAX {
+            let (ct, ci) = (self.params.traversal_cost, self.params.intersect_cost);
+            let area = bounds.half_area();
+            if ci * n.div_ceil(4) as f32 * area <= ct * area + ci * cost / 4.0 {
+                return 0;
+            }
+        }
         let lo = cbounds.min[axis];
         let scale = BINS as f32 / cbounds.extent()[axis];
         let mid = partition_in_place(prims, |p| (p.c(axis) - lo) * scale < split_bin as f32);
