@@ -346,6 +346,7 @@ impl<'s, A: Accel> World<'s, A> {
         // is entered (objects are few; a wasted bottom-level entry costs far more).
         let mut top_params = *params;
         top_params.base_mut().max_leaf_prims = 1;
+        top_params.base_mut().sah_leaf_max = 1;
         let top = A::build(&boxes, &top_params);
         let mut lights = scene.lights.clone();
         for (i, o) in scene.objects.iter().enumerate() {

@@ -4,7 +4,7 @@
 //! straddles the split plane therefore lands on one side and grows that child's box (so
 //! sibling boxes may overlap, which is what makes a BVH a BVH rather than a k-d tree).
 //! Recursion stops at `max_leaf_prims` primitives or at depth `max_depth` (24 by default); the
-//! SAH split also stops at up to [`SAH_LEAF_MAX`] primitives where a leaf is cheaper than any
+//! SAH split also stops at up to `sah_leaf_max` (8) primitives where a leaf is cheaper than any
 //! split (leaf triangles are tested four at a time, see [`crate::shape::Tri4`]).
 //!
 //! Build layout ≠ traversal layout (as in tinybvh): the builder makes a binary tree of 32-byte
@@ -270,9 +270,6 @@ pub struct Bvh {
 /// Deepest tree traversal supports (the build clamps `max_depth` to it).
 const MAX_STACK: usize = 64;
 const BINS: usize = 16;
-/// The SAH may make leaves of up to this many primitives (two blocks of four triangles) where a
-/// split would cost more; below `max_leaf_prims` every node is a leaf.
-const SAH_LEAF_MAX: usize = 8;
 const _: () = assert!(BINS.is_power_of_two(), "bin_indices masks with BINS - 1");
 
 /// The binary builder. It only reads shared data, so subtrees build in parallel.
@@ -448,7 +445,7 @@ impl Builder {
         // SAH termination for small nodes: a leaf when testing its primitives costs less than
         // a split (traversal step plus the children's expected tests). Leaf triangles are
         // tested four at a time, so a leaf costs one test per block of four.
-        if n <= SAH_LEAF_MAX {
+        if n <= self.params.sah_leaf_max {
             let (ct, ci) = (self.params.traversal_cost, self.params.intersect_cost);
             let area = bounds.half_area();
             if ci * n.div_ceil(4) as f32 * area <= ct * area + ci * cost / 4.0 {

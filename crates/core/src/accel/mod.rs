@@ -221,11 +221,15 @@ pub struct AccelParams {
     pub traversal_cost: f32,
     /// SAH cost of one primitive test.
     pub intersect_cost: f32,
+    /// The SAH BVH may also make a leaf of up to this many primitives where that is cheaper
+    /// than any split, costing leaf triangles in blocks of four (they are tested four at a
+    /// time). 8 by default; at most `max_leaf_prims` turns this off.
+    pub sah_leaf_max: usize,
 }
 
 impl Default for AccelParams {
     fn default() -> Self {
-        AccelParams { max_leaf_prims: 4, max_depth: 24, traversal_cost: 1.0, intersect_cost: 1.0 }
+        AccelParams { max_leaf_prims: 4, max_depth: 24, traversal_cost: 1.0, intersect_cost: 1.0, sah_leaf_max: 8 }
     }
 }
 
