@@ -128,9 +128,8 @@ fn measure<A: Accel>(
     work: &[(&'static str, Vec<Ray>)],
     reps: u32,
 ) -> Vec<Row> {
-    let (_, blas) = w.structures();
+    let (top, blas) = w.structures();
     let stats = blas.first().and_then(|b| b.as_ref()).map(|b| b.stats()).unwrap_or_default();
-    let (top, _) = w.structures();
     // Like Embree's figure: the structures and the triangle data their leaves point to.
     let bytes = stats.bytes + top.stats().bytes + w.triangle_bytes();
     work.iter()

@@ -291,10 +291,15 @@ impl TriData {
         match self {
             TriData::Leaves { blocks, ranges } => {
                 let r4 = Ray4::new(wr);
-                accel.any_leaf(ray, t_max, |leaf, tm| {
-                    let (a, b) = ranges[leaf as usize];
-                    blocks[a as usize..b as usize].iter().any(|block| block.any(&r4, tm))
-                })
+                accel.any_leaf_counted(
+                    ray,
+                    t_max,
+                    |leaf, tm| {
+                        let (a, b) = ranges[leaf as usize];
+                        blocks[a as usize..b as usize].iter().any(|block| block.any(&r4, tm))
+                    },
+                    &NoCount,
+                )
             }
             TriData::Single(tris) => accel.any(ray, t_max, |tri, tm| {
                 let [a, b, c] = tris[tri as usize];

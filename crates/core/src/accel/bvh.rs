@@ -304,6 +304,13 @@ impl PRef {
     fn aabb(&self) -> Aabb {
         Aabb { min: self.min.into(), max: self.max.into() }
     }
+
+    /// `(min, max, centre)` as SIMD vectors (the centre with [`PRef::c`]'s arithmetic).
+    #[inline(always)]
+    fn simd(&self) -> (Vec3A, Vec3A, Vec3A) {
+        let (lo, hi) = (Vec3A::from_array(self.min), Vec3A::from_array(self.max));
+        (lo, hi, (lo + hi) * 0.5)
+    }
 }
 
 /// Subtrees with more primitives than this are built as separate tasks.
@@ -315,8 +322,7 @@ impl Builder {
         let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
         let (mut clo, mut chi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
         for p in prims {
-            let (pmin, pmax) = (Vec3A::from_array(p.min), Vec3A::from_array(p.max));
-            let c = (pmin + pmax) * 0.5;
+            let (pmin, pmax, c) = p.simd();
             lo = lo.min(pmin);
             hi = hi.max(pmax);
             clo = clo.min(c);
@@ -417,9 +423,8 @@ impl Builder {
         let mut bins = [Bins::<BINS>::new(), Bins::new(), Bins::new()];
         let mut bin_n = [[0usize; BINS]; 3];
         for p in prims.iter() {
-            let (pmin, pmax) = (Vec3A::from_array(p.min), Vec3A::from_array(p.max));
-            // The arithmetic of `PRef::c`, three axes at once.
-            let f = (((pmin + pmax) * 0.5 - lo_v) * scale_v).max(Vec3A::ZERO).min(Vec3A::splat((BINS - 1) as f32));
+            let (pmin, pmax, c) = p.simd();
+            let f = ((c - lo_v) * scale_v).max(Vec3A::ZERO).min(Vec3A::splat((BINS - 1) as f32));
             let f = bin_indices(f);
             for axis in 0..3 {
                 let b = f[axis];
@@ -765,105 +770,6 @@ fn visit(
 }
 
 impl Bvh {
-    /// Closest hit over whole leaves: `test(leaf, t_max)` returns the closest hit in the leaf.
-    #[inline(always)]
-    fn closest_leaves(
-        &self,
-        ray: &Ray,
-        t_max: &mut f32,
-        mut test: impl FnMut(u32, f32) -> Option<f32>,
-        counter: &impl Counter,
-    ) -> bool {
-        let inv = ray.d.recip();
-        if self.root_box.slab(ray.o, inv, 0.0, *t_max).is_none() {
-            return false;
-        }
-        // A tree that is a single leaf starts at that leaf (one call site of `test`, so that
-        // it is inlined).
-        let root = if self.root_leaf {
-            LEAF
-        } else if self.nodes.is_empty() {
-            return false;
-        } else {
-            0
-        };
-        let mut hit = false;
-        let r = RayPre::new(ray, inv);
-        // Uninitialised: zeroing 1.5 KiB per ray showed up in profiles. Only entries below `sp`
-        // are read, and each was written first.
-        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
-        stack[0].write((root, 0.0));
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            // SAFETY: stack[sp] was written before sp was raised past it.
-            let (mut cur, t_enter) = unsafe { stack[sp].assume_init() };
-            if t_enter > *t_max {
-                continue;
-            }
-            loop {
-                if cur & LEAF != 0 {
-                    if let Some(t) = test(cur & !LEAF, *t_max) {
-                        *t_max = t;
-                        hit = true;
-                    }
-                    break;
-                }
-                counter.node();
-                match visit(&self.nodes[cur as usize], &r, *t_max, &mut stack, &mut sp) {
-                    Some(next) => cur = next,
-                    None => break,
-                }
-            }
-        }
-        hit
-    }
-
-    /// Any hit over whole leaves: `test(leaf, t_max)` says whether the leaf blocks the ray.
-    #[inline(always)]
-    fn any_leaves(
-        &self,
-        ray: &Ray,
-        t_max: f32,
-        mut test: impl FnMut(u32, f32) -> bool,
-        counter: &impl Counter,
-    ) -> bool {
-        let inv = ray.d.recip();
-        if self.root_box.slab(ray.o, inv, 0.0, t_max).is_none() {
-            return false;
-        }
-        let root = if self.root_leaf {
-            LEAF
-        } else if self.nodes.is_empty() {
-            return false;
-        } else {
-            0
-        };
-        let r = RayPre::new(ray, inv);
-        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
-        stack[0].write((root, 0.0));
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            // SAFETY: stack[sp] was written before sp was raised past it.
-            let (mut cur, _) = unsafe { stack[sp].assume_init() };
-            loop {
-                if cur & LEAF != 0 {
-                    if test(cur & !LEAF, t_max) {
-                        return true;
-                    }
-                    break;
-                }
-                counter.node();
-                match visit(&self.nodes[cur as usize], &r, t_max, &mut stack, &mut sp) {
-                    Some(next) => cur = next,
-                    None => break,
-                }
-            }
-        }
-        false
-    }
-
     fn leaf(&self, leaf: u32) -> &[u32] {
         let (first, count) = self.leaves[leaf as usize];
         &self.prims[first as usize..(first + count) as usize]
@@ -945,7 +851,7 @@ impl Accel for Bvh {
         mut test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        self.closest_leaves(
+        self.closest_leaf_counted(
             ray,
             t_max,
             |leaf, mut tm| {
@@ -969,25 +875,108 @@ impl Accel for Bvh {
         mut test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        self.any_leaves(ray, t_max, |leaf, tm| self.leaf(leaf).iter().any(|&p| test(p, tm)), counter)
+        self.any_leaf_counted(ray, t_max, |leaf, tm| self.leaf(leaf).iter().any(|&p| test(p, tm)), counter)
     }
 
     fn leaves(&self) -> Option<Vec<&[u32]>> {
         Some((0..self.leaves.len() as u32).map(|l| self.leaf(l)).collect())
     }
 
+    #[inline(always)]
     fn closest_leaf_counted(
         &self,
         ray: &Ray,
         t_max: &mut f32,
-        test: impl FnMut(u32, f32) -> Option<f32>,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        self.closest_leaves(ray, t_max, test, counter)
+        let inv = ray.d.recip();
+        if self.root_box.slab(ray.o, inv, 0.0, *t_max).is_none() {
+            return false;
+        }
+        // A tree that is a single leaf starts at that leaf (one call site of `test`, so that
+        // it is inlined).
+        let root = if self.root_leaf {
+            LEAF
+        } else if self.nodes.is_empty() {
+            return false;
+        } else {
+            0
+        };
+        let mut hit = false;
+        let r = RayPre::new(ray, inv);
+        // Uninitialised: zeroing 1.5 KiB per ray showed up in profiles. Only entries below `sp`
+        // are read, and each was written first.
+        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
+        stack[0].write((root, 0.0));
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            // SAFETY: stack[sp] was written before sp was raised past it.
+            let (mut cur, t_enter) = unsafe { stack[sp].assume_init() };
+            if t_enter > *t_max {
+                continue;
+            }
+            loop {
+                if cur & LEAF != 0 {
+                    if let Some(t) = test(cur & !LEAF, *t_max) {
+                        *t_max = t;
+                        hit = true;
+                    }
+                    break;
+                }
+                counter.node();
+                match visit(&self.nodes[cur as usize], &r, *t_max, &mut stack, &mut sp) {
+                    Some(next) => cur = next,
+                    None => break,
+                }
+            }
+        }
+        hit
     }
 
-    fn any_leaf(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
-        self.any_leaves(ray, t_max, test, &super::NoCount)
+    #[inline(always)]
+    fn any_leaf_counted(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        mut test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
+        let inv = ray.d.recip();
+        if self.root_box.slab(ray.o, inv, 0.0, t_max).is_none() {
+            return false;
+        }
+        let root = if self.root_leaf {
+            LEAF
+        } else if self.nodes.is_empty() {
+            return false;
+        } else {
+            0
+        };
+        let r = RayPre::new(ray, inv);
+        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); 3 * MAX_STACK];
+        stack[0].write((root, 0.0));
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            // SAFETY: stack[sp] was written before sp was raised past it.
+            let (mut cur, _) = unsafe { stack[sp].assume_init() };
+            loop {
+                if cur & LEAF != 0 {
+                    if test(cur & !LEAF, t_max) {
+                        return true;
+                    }
+                    break;
+                }
+                counter.node();
+                match visit(&self.nodes[cur as usize], &r, t_max, &mut stack, &mut sp) {
+                    Some(next) => cur = next,
+                    None => break,
+                }
+            }
+        }
+        false
     }
 
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {

@@ -13,7 +13,7 @@
 
 use glam::Vec3;
 
-use super::{Accel, AccelParams, AccelStats, BuildParams, Counter, OrderedLeaves};
+use super::{Accel, AccelParams, AccelStats, BuildParams, Counter, OrderedWalk};
 use crate::geometry::{Aabb, Ray};
 
 /// Grid build settings.
@@ -61,6 +61,20 @@ impl Grid {
         [0, 1, 2].map(|a| (q[a].floor() as i64).clamp(0, self.res[a] as i64 - 1) as i32)
     }
 
+    /// Indices of the cells that the box `b` overlaps.
+    fn cells_of(&self, b: &Aabb) -> impl Iterator<Item = usize> + '_ {
+        let (lo, hi) = (self.cell_of(b.min), self.cell_of(b.max));
+        (lo[2]..=hi[2]).flat_map(move |z| {
+            (lo[1]..=hi[1]).flat_map(move |y| (lo[0]..=hi[0]).map(move |x| self.cell_index([x, y, z])))
+        })
+    }
+
+    fn prims_in(&self, cell: usize) -> &[u32] {
+        &self.cell_prims[self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize]
+    }
+}
+
+impl OrderedWalk for Grid {
     /// Walks the cells the ray pierces within `[0, t_max]`, nearest first. `visit(prims, t_exit)`
     /// returns false to stop.
     #[inline]
@@ -119,18 +133,6 @@ impl Grid {
             }
             next[a] += delta[a];
         }
-    }
-
-    /// Indices of the cells that the box `b` overlaps.
-    fn cells_of(&self, b: &Aabb) -> impl Iterator<Item = usize> + '_ {
-        let (lo, hi) = (self.cell_of(b.min), self.cell_of(b.max));
-        (lo[2]..=hi[2]).flat_map(move |z| {
-            (lo[1]..=hi[1]).flat_map(move |y| (lo[0]..=hi[0]).map(move |x| self.cell_index([x, y, z])))
-        })
-    }
-
-    fn prims_in(&self, cell: usize) -> &[u32] {
-        &self.cell_prims[self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize]
     }
 }
 
@@ -205,25 +207,14 @@ impl Accel for Grid {
         &self,
         ray: &Ray,
         t_max: &mut f32,
-        mut test: impl FnMut(u32, f32) -> Option<f32>,
+        test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        let mut leaves = OrderedLeaves::new(*t_max);
-        self.walk(ray, *t_max, counter, |prims, t_exit| leaves.closest(prims, t_exit, &mut test));
-        *t_max = leaves.best;
-        leaves.hit
+        self.walk_closest(ray, t_max, test, counter)
     }
 
-    fn any_counted(
-        &self,
-        ray: &Ray,
-        t_max: f32,
-        mut test: impl FnMut(u32, f32) -> bool,
-        counter: &impl Counter,
-    ) -> bool {
-        let mut leaves = OrderedLeaves::new(t_max);
-        self.walk(ray, t_max, counter, |prims, _| leaves.any(prims, t_max, &mut test));
-        leaves.hit
+    fn any_counted(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool, counter: &impl Counter) -> bool {
+        self.walk_any(ray, t_max, test, counter)
     }
 
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {

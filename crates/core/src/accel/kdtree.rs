@@ -11,7 +11,7 @@
 //! Primitives listed in several leaves are tested once per ray (64-entry mailbox, as in
 //! [`super::Grid`]).
 
-use super::{Accel, AccelParams, AccelStats, BuildParams, Counter, OrderedLeaves};
+use super::{Accel, AccelParams, AccelStats, BuildParams, Counter, OrderedWalk};
 use crate::geometry::{Aabb, Ray};
 
 /// k-d tree build settings.
@@ -153,7 +153,7 @@ impl Builder<'_> {
     }
 }
 
-impl KdTree {
+impl OrderedWalk for KdTree {
     /// Visits leaves in front-to-back order; `visit(prims, t_exit)` returns false to stop.
     #[inline]
     fn walk(&self, ray: &Ray, t_max: f32, counter: &impl Counter, mut visit: impl FnMut(&[u32], f32) -> bool) {
@@ -250,25 +250,14 @@ impl Accel for KdTree {
         &self,
         ray: &Ray,
         t_max: &mut f32,
-        mut test: impl FnMut(u32, f32) -> Option<f32>,
+        test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        let mut leaves = OrderedLeaves::new(*t_max);
-        self.walk(ray, *t_max, counter, |prims, t_exit| leaves.closest(prims, t_exit, &mut test));
-        *t_max = leaves.best;
-        leaves.hit
+        self.walk_closest(ray, t_max, test, counter)
     }
 
-    fn any_counted(
-        &self,
-        ray: &Ray,
-        t_max: f32,
-        mut test: impl FnMut(u32, f32) -> bool,
-        counter: &impl Counter,
-    ) -> bool {
-        let mut leaves = OrderedLeaves::new(t_max);
-        self.walk(ray, t_max, counter, |prims, _| leaves.any(prims, t_max, &mut test));
-        leaves.hit
+    fn any_counted(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool, counter: &impl Counter) -> bool {
+        self.walk_any(ray, t_max, test, counter)
     }
 
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {

@@ -73,7 +73,7 @@ pub trait Accel: Send + Sync + Sized {
 
     /// The primitives of each leaf, indexed by leaf id, for structures that test a leaf's
     /// primitives together (the BVHs). Callers may then lay out primitive data leaf by leaf and
-    /// use [`Accel::closest_leaf_counted`] / [`Accel::any_leaf`]. `None` (the default) means
+    /// use [`Accel::closest_leaf_counted`] / [`Accel::any_leaf_counted`]. `None` (the default) means
     /// each primitive is its own leaf: leaf id = primitive id.
     fn leaves(&self) -> Option<Vec<&[u32]>> {
         None
@@ -92,8 +92,14 @@ pub trait Accel: Send + Sync + Sized {
     }
 
     /// Any hit, leaf at a time (see [`Accel::closest_leaf_counted`]).
-    fn any_leaf(&self, ray: &Ray, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
-        self.any(ray, t_max, test)
+    fn any_leaf_counted(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
+        self.any_counted(ray, t_max, test, counter)
     }
 
     /// Size and shape of the structure.
@@ -107,7 +113,7 @@ pub trait Accel: Send + Sync + Sized {
 /// overlap along the ray (grid cells, k-d tree leaves), with a per-ray mailbox: a primitive
 /// listed in several leaves is tested once. The mailbox is a 64-entry direct-mapped cache of
 /// primitive ids; a collision only means a repeated test, never a wrong answer.
-pub(crate) struct OrderedLeaves {
+struct OrderedLeaves {
     mailbox: [u32; 64],
     pub best: f32,
     pub hit: bool,
@@ -153,6 +159,38 @@ impl OrderedLeaves {
             }
         }
         true
+    }
+}
+
+/// Structures whose traversal hands out leaves front to back, not overlapping along the ray
+/// (grid cells, k-d tree leaves). Closest and any hit follow from `walk` with a mailbox
+/// ([`OrderedLeaves`]).
+pub(crate) trait OrderedWalk {
+    /// Calls `visit(prims, t_exit)` for each leaf the ray meets within `[0, t_max]`, nearest
+    /// first, until `visit` returns false.
+    fn walk(&self, ray: &Ray, t_max: f32, counter: &impl Counter, visit: impl FnMut(&[u32], f32) -> bool);
+
+    /// [`Accel::closest_counted`] over the walk.
+    #[inline]
+    fn walk_closest(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        let mut leaves = OrderedLeaves::new(*t_max);
+        self.walk(ray, *t_max, counter, |prims, t_exit| leaves.closest(prims, t_exit, &mut test));
+        *t_max = leaves.best;
+        leaves.hit
+    }
+
+    /// [`Accel::any_counted`] over the walk.
+    #[inline]
+    fn walk_any(&self, ray: &Ray, t_max: f32, mut test: impl FnMut(u32, f32) -> bool, counter: &impl Counter) -> bool {
+        let mut leaves = OrderedLeaves::new(t_max);
+        self.walk(ray, t_max, counter, |prims, _| leaves.any(prims, t_max, &mut test));
+        leaves.hit
     }
 }
 
