@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use snell_core::accel::{AccelKind, AccelParams};
-use snell_core::integrator::{RayStats, Whitted};
+use snell_core::integrator::{IntegratorKind, RayStats};
 use snell_core::render::{render, RenderSettings};
 use snell_core::with_world;
 use snell_io::scene::LoadedScene;
@@ -58,9 +58,17 @@ struct RenderArgs {
     /// Worker threads (default: one per core). Does not change the image.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
     threads: Option<u32>,
-    /// Maximum depth of the ray tree (0: camera and shadow rays only).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=1000))]
+    /// Integrator: whitted (the lecture's recursive ray tree) or path (path tracing with
+    /// next-event estimation and MIS).
+    #[arg(long, value_parser = parse_integrator)]
+    integrator: Option<IntegratorKind>,
+    /// Whitted: maximum depth of the ray tree (0: camera and shadow rays only; default 10).
+    /// Path: longest path in segments (1: emitters only, 2: direct light; default unbounded).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100_000))]
     max_depth: Option<u32>,
+    /// Path: depth at which Russian roulette starts.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100_000))]
+    rr_depth: Option<u32>,
     /// Prune branches whose accumulated weight falls below this.
     #[arg(long, value_parser = parse_attenuation)]
     min_attenuation: Option<f32>,
@@ -86,6 +94,10 @@ fn parse_attenuation(s: &str) -> Result<f32, String> {
 }
 
 fn parse_accel(s: &str) -> Result<AccelKind, String> {
+    s.parse()
+}
+
+fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
     s.parse()
 }
 
@@ -130,13 +142,17 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         spp: args.spp.unwrap_or(s.spp),
         seed: args.seed.unwrap_or(s.seed),
         threads: args.threads.unwrap_or(0) as usize,
-        filter: s.filter,
+        filter: s.filter.clone(),
     };
     settings.check().map_err(anyhow::Error::msg)?;
-    let integrator = Whitted {
-        max_depth: args.max_depth.unwrap_or(s.max_depth),
+    let integrator = snell_io::scene::SceneSettings {
+        integrator: args.integrator.unwrap_or(s.integrator),
+        max_depth: args.max_depth.or(s.max_depth),
         min_attenuation: args.min_attenuation.unwrap_or(s.min_attenuation),
-    };
+        rr_depth: args.rr_depth.unwrap_or(s.rr_depth),
+        ..s.clone()
+    }
+    .integrator();
     let accel = args.accel.unwrap_or(s.accel);
     // An automatic camera is framed for the final aspect ratio.
     if let Some(c) = loaded.frame.and_then(|b| snell_io::scene::auto_camera(b, settings.width, settings.height)) {

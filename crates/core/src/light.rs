@@ -61,6 +61,9 @@ pub struct LightSample {
     /// Incident radiance divided by the sampling pdf (solid angle), so that
     /// `f · cos · value` estimates the reflected radiance.
     pub value: Rgb,
+    /// The solid-angle pdf of `wi` (0 for point, spot and directional lights: delta lights,
+    /// which no BSDF sample can hit).
+    pub pdf: f32,
 }
 
 impl Light {
@@ -84,6 +87,7 @@ impl Light {
                     n: Vec3::ZERO,
                     infinite: false,
                     value: *intensity / d2,
+                    pdf: 0.0,
                 })
             }
             Light::Spot { position, direction, intensity, cos_inner, cos_outer } => {
@@ -101,6 +105,7 @@ impl Light {
                     n: Vec3::ZERO,
                     infinite: false,
                     value: *intensity * (falloff / d2),
+                    pdf: 0.0,
                 })
             }
             Light::Directional { direction, irradiance } => Some(LightSample {
@@ -109,8 +114,52 @@ impl Light {
                 n: Vec3::ZERO,
                 infinite: true,
                 value: *irradiance,
+                pdf: 0.0,
             }),
             Light::Area(a) => a.sample(p, u),
+        }
+    }
+}
+
+impl Light {
+    /// The solid-angle density with which [`Light::sample`] at `p` picks the direction
+    /// towards `q`, a point on this light with unit normal `nq` (0 for delta lights).
+    pub fn pdf(&self, p: Vec3, q: Vec3, nq: Vec3) -> f32 {
+        let Light::Area(a) = self else { return 0.0 };
+        match &a.shape {
+            AreaShape::Sphere(s) => {
+                let d2 = (s.center - p).length_squared();
+                let r2 = s.radius * s.radius;
+                if d2 <= r2 * 1.0001 {
+                    return 0.0;
+                }
+                let cos_max = (1.0 - r2 / d2).max(0.0).sqrt();
+                1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12))
+            }
+            AreaShape::Triangles { cdf, .. } => {
+                let total = *cdf.last().unwrap_or(&0.0);
+                let d = q - p;
+                let dist2 = d.length_squared();
+                let cos_l = -nq.dot(d) / dist2.sqrt();
+                if total <= 0.0 || cos_l <= 0.0 {
+                    return 0.0;
+                }
+                dist2 / (cos_l * total)
+            }
+        }
+    }
+
+    /// Emitted power (mean over the channels), for choosing lights in proportion to it.
+    /// `scene_radius` bounds the scene, for directional lights.
+    pub fn power(&self, scene_radius: f32) -> f32 {
+        let mean = |c: &Rgb| c.element_sum() / 3.0;
+        match self {
+            Light::Point { intensity, .. } => 4.0 * PI * mean(intensity),
+            Light::Spot { intensity, cos_inner, cos_outer, .. } => {
+                2.0 * PI * mean(intensity) * (1.0 - 0.5 * (cos_inner + cos_outer))
+            }
+            Light::Directional { irradiance, .. } => PI * scene_radius * scene_radius * mean(irradiance),
+            Light::Area(a) => PI * a.area() * mean(&a.emission),
         }
     }
 }
@@ -152,7 +201,7 @@ impl AreaLight {
                 let q = p + wi * t;
                 let n = (q - s.center).normalize();
                 let pdf = 1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12));
-                Some(LightSample { wi, p: q, n, infinite: false, value: self.emission / pdf })
+                Some(LightSample { wi, p: q, n, infinite: false, value: self.emission / pdf, pdf })
             }
             AreaShape::Triangles { tris, cdf } => {
                 let total = *cdf.last()?;
@@ -175,8 +224,8 @@ impl AreaLight {
                     return None; // Back of a one-sided emitter.
                 }
                 // Area pdf 1/A converted to solid angle: dist² / (cos_l · A).
-                let value = self.emission * (cos_l * total / dist2);
-                Some(LightSample { wi, p: q, n, infinite: false, value })
+                let pdf = dist2 / (cos_l * total);
+                Some(LightSample { wi, p: q, n, infinite: false, value: self.emission / pdf, pdf })
             }
         }
     }

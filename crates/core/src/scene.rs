@@ -318,6 +318,10 @@ pub struct World<'s, A: Accel> {
     /// Per geometry, the triangles laid out for its bottom-level structure.
     tris: Vec<TriData>,
     pub lights: Vec<Light>,
+    /// Running sum of the lights' powers, for choosing one in proportion to its power.
+    light_cdf: Vec<f32>,
+    /// Per object, the index of its area light in `lights` (`u32::MAX`: not emissive).
+    object_light: Vec<u32>,
 }
 
 impl<'s, A: Accel> World<'s, A> {
@@ -354,12 +358,50 @@ impl<'s, A: Accel> World<'s, A> {
         top_params.base_mut().sah_leaf_max = 1;
         let top = A::build(&boxes, &top_params);
         let mut lights = scene.lights.clone();
+        let mut object_light = vec![u32::MAX; scene.objects.len()];
         for (i, o) in scene.objects.iter().enumerate() {
             if o.emission != Rgb::ZERO && o.emission.is_finite() {
+                object_light[i] = lights.len() as u32;
                 lights.push(Light::Area(scene.area_light(i, o)));
             }
         }
-        World { scene, top, blas, tris, lights }
+        let radius = 0.5 * scene.aabb().extent().length();
+        let radius = if radius.is_finite() { radius } else { 1.0 };
+        let light_cdf = crate::sampling::build_cdf(lights.iter().map(|l| {
+            let p = l.power(radius);
+            if p.is_finite() && p > 0.0 {
+                p
+            } else {
+                0.0
+            }
+        }));
+        World { scene, top, blas, tris, lights, light_cdf, object_light }
+    }
+
+    /// Chooses a light in proportion to its power: its index and the probability of the choice.
+    pub fn choose_light(&self, u: f32) -> Option<(usize, f32)> {
+        let total = *self.light_cdf.last()?;
+        if total.is_nan() || total <= 0.0 {
+            return None;
+        }
+        let (i, _) = crate::sampling::sample_cdf(&self.light_cdf, u);
+        Some((i, self.light_probability(i)))
+    }
+
+    /// The probability that [`World::choose_light`] picks light `i`.
+    pub fn light_probability(&self, i: usize) -> f32 {
+        let total = self.light_cdf.last().copied().unwrap_or(0.0);
+        let lo = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
+        if total > 0.0 {
+            (self.light_cdf[i] - lo) / total
+        } else {
+            0.0
+        }
+    }
+
+    /// The area light of an object, if it emits.
+    pub fn light_of(&self, object: u32) -> Option<usize> {
+        self.object_light.get(object as usize).filter(|&&l| l != u32::MAX).map(|&l| l as usize)
     }
 
     /// Bytes of triangle data laid out for the bottom-level structures (blocks of four, or one

@@ -15,7 +15,9 @@ use snell_core::accel::AccelKind;
 use snell_core::camera::{Camera, Projection};
 use snell_core::filter::Filter;
 use snell_core::geometry::{Aabb, Transform};
+use snell_core::integrator::{AnyIntegrator, IntegratorKind, Path as PathTracer, Whitted};
 use snell_core::light::Light;
+use snell_core::material::microfacet::Distribution;
 use snell_core::material::{self, Material};
 use snell_core::scene::{Geometry, Object, Scene};
 use snell_core::shape::{Mesh, Sphere};
@@ -31,8 +33,13 @@ pub struct SceneSettings {
     pub height: u32,
     pub spp: u32,
     pub seed: u64,
-    pub max_depth: u32,
+    pub integrator: IntegratorKind,
+    /// Whitted: depth of the ray tree (default 10). Path: longest path in segments (default
+    /// unbounded, as Mitsuba's `max_depth = -1`).
+    pub max_depth: Option<u32>,
     pub min_attenuation: f32,
+    /// Path: depth at which Russian roulette starts (Mitsuba's `rr_depth`, default 5).
+    pub rr_depth: u32,
     pub accel: AccelKind,
     pub filter: Filter,
 }
@@ -44,10 +51,28 @@ impl Default for SceneSettings {
             height: 480,
             spp: 16,
             seed: 0,
-            max_depth: 10,
+            integrator: IntegratorKind::Whitted,
+            max_depth: None,
             min_attenuation: 1e-3,
+            rr_depth: 5,
             accel: AccelKind::DEFAULT,
             filter: Filter::default(),
+        }
+    }
+}
+
+impl SceneSettings {
+    /// The integrator these settings describe, with each one's defaults filled in.
+    pub fn integrator(&self) -> AnyIntegrator {
+        match self.integrator {
+            IntegratorKind::Whitted => AnyIntegrator::Whitted(Whitted {
+                max_depth: self.max_depth.unwrap_or(Whitted::default().max_depth),
+                min_attenuation: self.min_attenuation,
+            }),
+            IntegratorKind::Path => AnyIntegrator::Path(PathTracer {
+                max_depth: self.max_depth.unwrap_or(u32::MAX),
+                rr_depth: self.rr_depth,
+            }),
         }
     }
 }
@@ -204,8 +229,10 @@ struct RenderDef {
     height: S<i64>,
     spp: S<i64>,
     seed: Option<u64>,
+    integrator: S<String>,
     max_depth: S<i64>,
     min_attenuation: S<Num>,
+    rr_depth: S<i64>,
     accel: S<String>,
     filter: S<String>,
     filter_radius: S<Num>,
@@ -243,6 +270,7 @@ struct MaterialDef {
     reflectance: S<Color>,
     transmittance: S<Color>,
     base: S<Color>,
+    distribution: S<String>,
 }
 
 #[derive(Deserialize)]
@@ -452,8 +480,14 @@ fn render_settings(cx: &Ctx, r: Option<&RenderDef>) -> Result<SceneSettings, Err
     s.height = cx.int(&r.height, 1, 65536, "height", s.height as i64)? as u32;
     s.spp = cx.int(&r.spp, 1, 1 << 20, "spp", s.spp as i64)? as u32;
     s.seed = r.seed.unwrap_or(0);
-    s.max_depth = cx.int(&r.max_depth, 0, 1000, "max_depth", s.max_depth as i64)? as u32;
+    if let Some(i) = &r.integrator {
+        s.integrator = i.get_ref().parse().map_err(|e: String| cx.err(i.span(), e))?;
+    }
+    if r.max_depth.is_some() {
+        s.max_depth = Some(cx.int(&r.max_depth, 0, 100_000, "max_depth", 0)? as u32);
+    }
     s.min_attenuation = cx.num(&r.min_attenuation, 0.0, 1.0, "min_attenuation", s.min_attenuation)?;
+    s.rr_depth = cx.int(&r.rr_depth, 0, 100_000, "rr_depth", s.rr_depth as i64)? as u32;
     if let Some(a) = &r.accel {
         s.accel = a.get_ref().parse().map_err(|e: String| cx.err(a.span(), e))?;
     }
@@ -526,21 +560,24 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
     // Keys each type accepts; everything else is rejected with its position.
     let allowed: &[&str] = match kind {
         "diffuse" => &["albedo"],
-        "glossy" => &["albedo", "specular", "roughness", "ior"],
-        "conductor" => &["metal", "eta", "k", "roughness"],
+        "glossy" | "plastic" => &["albedo", "specular", "roughness", "ior", "distribution"],
+        "conductor" => &["metal", "eta", "k", "roughness", "distribution"],
         "mirror" => &["reflectance"],
-        "dielectric" => &["ior", "transmittance"],
+        "dielectric" => &["ior", "transmittance", "roughness", "distribution"],
+        "thindielectric" => &["ior", "transmittance"],
         "glazed" => &["ior", "base"],
         _ => {
             return Err(cx.err(
                 m.kind.span(),
                 format!(
-                "unknown material type '{kind}' (expected diffuse, glossy, conductor, mirror, dielectric or glazed)"
-            ),
+                    "unknown material type '{kind}' (expected diffuse, glossy, plastic, conductor, mirror, \
+                     dielectric, thindielectric or glazed)"
+                ),
             ))
         }
     };
-    let present: [(&str, Option<Range<usize>>); 10] = [
+    let present: [(&str, Option<Range<usize>>); 11] = [
+        ("distribution", m.distribution.as_ref().map(|s| s.span())),
         ("albedo", m.albedo.as_ref().map(|s| s.span())),
         ("specular", m.specular.as_ref().map(|s| s.span())),
         ("roughness", m.roughness.as_ref().map(|s| s.span())),
@@ -572,14 +609,22 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
             )),
         }
     };
+    let distribution = match m.distribution.as_ref().map(|d| (d.get_ref().as_str(), d.span())) {
+        None | Some(("ggx", _)) => Distribution::Ggx,
+        Some(("beckmann", _)) => Distribution::Beckmann,
+        Some((other, span)) => {
+            return Err(cx.err(span, format!("unknown microfacet distribution '{other}' (expected ggx or beckmann)")))
+        }
+    };
     Ok(match kind {
         "diffuse" => Material::Diffuse { albedo: tex(Rgb::splat(0.8)) },
-        "glossy" => Material::Glossy {
-            albedo: tex(Rgb::splat(0.5)),
-            specular: color(&m.specular, Rgb::ONE),
-            roughness: roughness(0.2)?,
-            ior: ior(1.5)?,
-        },
+        "glossy" | "plastic" => Material::plastic(
+            tex(Rgb::splat(0.5)),
+            color(&m.specular, Rgb::ONE),
+            ior(1.5)?,
+            roughness(if kind == "glossy" { 0.2 } else { 0.0 })?,
+            distribution,
+        ),
         "conductor" => {
             let (eta, k) = match (&m.metal, &m.eta, &m.k) {
                 (Some(name), None, None) => material::metal(name.get_ref()).ok_or_else(|| {
@@ -592,11 +637,19 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
                 (None, None, None) => material::metal("silver").map_or((Rgb::ONE, Rgb::ZERO), |v| v),
                 _ => return Err(cx.err(def.span(), "a conductor takes either 'metal' or both 'eta' and 'k'")),
             };
-            Material::Conductor { eta, k, roughness: roughness(0.0)? }
+            Material::Conductor { eta, k, roughness: roughness(0.0)?, distribution }
         }
         "mirror" => Material::Mirror { reflectance: color(&m.reflectance, Rgb::ONE) },
-        "dielectric" => Material::Dielectric { ior: ior(1.5)?, transmittance: color(&m.transmittance, Rgb::ONE) },
-        _ => Material::Glazed { ior: ior(1.5)?, base: color(&m.base, Rgb::ZERO) },
+        "dielectric" => Material::Dielectric {
+            ior: ior(1.5)?,
+            transmittance: color(&m.transmittance, Rgb::ONE),
+            roughness: roughness(0.0)?,
+            distribution,
+        },
+        "thindielectric" => {
+            Material::ThinDielectric { ior: ior(1.5)?, transmittance: color(&m.transmittance, Rgb::ONE) }
+        }
+        _ => Material::plastic(color(&m.base, Rgb::ZERO).into(), Rgb::ONE, ior(1.5)?, 0.0, distribution),
     })
 }
 
@@ -879,12 +932,7 @@ pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
     let (c, r) = (b.center(), (b.extent().length() * 0.5).max(1e-6));
     let settings = SceneSettings::default();
     let materials = vec![
-        Material::Glossy {
-            albedo: Rgb::new(0.72, 0.66, 0.58).into(),
-            specular: Rgb::splat(0.5),
-            roughness: 0.25,
-            ior: 1.5,
-        },
+        Material::plastic(Rgb::new(0.72, 0.66, 0.58).into(), Rgb::splat(0.5), 1.5, 0.25, Distribution::Ggx),
         Material::Diffuse { albedo: Rgb::splat(0.5).into() },
         Material::Diffuse { albedo: Rgb::ZERO.into() },
     ];

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use snell_core::accel::AccelParams;
 use snell_core::image::Image;
-use snell_core::integrator::{RayStats, Whitted};
+use snell_core::integrator::RayStats;
 use snell_core::render::{render, RenderSettings};
 use snell_core::with_world;
 use snell_io::scene::LoadedScene;
@@ -40,10 +40,12 @@ pub fn render_loaded(l: &LoadedScene, o: &Opts) -> (Image, RayStats) {
         threads: o.threads,
         filter: l.settings.filter.clone(),
     };
-    let integrator = Whitted {
-        max_depth: o.max_depth.unwrap_or(l.settings.max_depth),
+    let integrator = snell_io::scene::SceneSettings {
+        max_depth: o.max_depth.or(l.settings.max_depth),
         min_attenuation: o.min_attenuation.unwrap_or(l.settings.min_attenuation),
-    };
+        ..l.settings.clone()
+    }
+    .integrator();
     let world = l.settings.accel.build_world(&scene, &AccelParams::default());
     with_world!(&world, w => render(w, &integrator, &settings, &|_| {}))
 }
@@ -383,4 +385,110 @@ material = "m"
     let (sharp, _) = render_src(&lens(4.0), &o);
     let (blurred, _) = render_src(&lens(40.0), &o);
     assert!(contrast(&sharp) > 2.0 * contrast(&blurred), "{} vs {}", contrast(&sharp), contrast(&blurred));
+}
+
+// ---- Path tracing -------------------------------------------------------------------------
+
+fn mean(img: &Image) -> snell_core::Rgb {
+    img.pixels.iter().copied().sum::<snell_core::Rgb>() / img.pixels.len() as f32
+}
+
+/// Furnaces for the path tracer: in a uniform environment of radiance 1, a convex diffuse
+/// object of albedo ρ has radiance ρ everywhere (it sees only the environment), and lossless
+/// glass, smooth or thin, is invisible. The environment is reached only by BSDF sampling.
+#[test]
+fn path_tracer_furnaces() {
+    let cases = [
+        ("type = \"diffuse\"\nalbedo = 0.5", 0.5, 0.02f32),
+        ("type = \"diffuse\"\nalbedo = 1", 1.0, 1e-4),
+        ("type = \"dielectric\"\nior = 1.5", 1.0, 1e-4),
+        ("type = \"thindielectric\"\nior = 1.5", 1.0, 1e-4),
+    ];
+    for (material, expect, tol) in cases {
+        let src = format!(
+            "[render]\nbackground = 1\nintegrator = \"path\"\nrr_depth = 1000\nmax_depth = 200\n[camera]\neye = [0, 0, 4]\nfov = 20\n\
+             [materials.m]\n{material}\n[[shapes]]\ntype = \"sphere\"\nradius = 1\nmaterial = \"m\"\n"
+        );
+        let (img, stats) = render_src(&src, &Opts { width: 16, height: 16, spp: 64, ..Opts::default() });
+        // The sphere fills the centre of the image.
+        let mut sum = 0.0f64;
+        let mut n = 0;
+        for y in 5..11 {
+            for x in 5..11 {
+                sum += img.get(x, y).x as f64;
+                n += 1;
+            }
+        }
+        let m = (sum / n as f64) as f32;
+        assert!((m - expect).abs() <= tol.max(1e-4) * expect, "{material}: mean {m}, expected {expect}");
+        assert!(stats.reflection + stats.refraction > 0);
+    }
+}
+
+/// Direct light only (paths of two segments): the path tracer's MIS of light sampling and
+/// BSDF sampling must give what the Whitted integrator's light sampling alone gives.
+#[test]
+fn path_tracer_direct_light_matches_light_sampling() {
+    let scene = |integrator: &str, depth: u32| {
+        format!(
+            "[render]\nintegrator = \"{integrator}\"\nmax_depth = {depth}\n[camera]\neye = [0, -3, 2]\nlook_at = [0, 0, 0]\nfov = 50\n\
+             [materials.floor]\ntype = \"diffuse\"\nalbedo = 0.6\n\
+             [materials.shiny]\ntype = \"glossy\"\nalbedo = 0.3\nroughness = 0.3\n\
+             [[shapes]]\ntype = \"quad\"\ncorner = [-3, -3, 0]\nedge1 = [6, 0, 0]\nedge2 = [0, 6, 0]\nmaterial = \"floor\"\n\
+             [[shapes]]\ntype = \"sphere\"\ncenter = [0.6, 0.5, 0.5]\nradius = 0.5\nmaterial = \"shiny\"\n\
+             [[shapes]]\ntype = \"quad\"\ncorner = [-0.5, -0.5, 2]\nedge1 = [0, 1, 0]\nedge2 = [1, 0, 0]\nemission = 4\nlight_samples = 16\n\
+             [[shapes]]\ntype = \"sphere\"\ncenter = [-1, 0.5, 1.2]\nradius = 0.1\nemission = 30\n"
+        )
+    };
+    // Enough samples that the tiny emitter seen directly (a fraction of a pixel) averages out:
+    // at 1024 / 256 spp the two agree to 0.1 %.
+    let o = Opts { width: 24, height: 24, spp: 256, ..Opts::default() };
+    let (path, _) = render_src(&scene("path", 2), &Opts { spp: 1024, ..o });
+    let (whitted, _) = render_src(&scene("whitted", 0), &o);
+    let (a, b) = (mean(&path), mean(&whitted));
+    assert!((a - b).abs().max_element() < 0.01 * b.max_element(), "path {a} vs light sampling {b}");
+}
+
+/// Global illumination with an exact answer: inside a closed box whose walls all emit `Le` and
+/// reflect diffusely with albedo ρ, radiance is the same everywhere and `L = Le + ρ L`, so
+/// `L = Le / (1 - ρ)`: every bounce matters (ρ = 0.5: half the light has bounced at least once).
+#[test]
+fn path_tracer_emissive_enclosure_converges_to_le_over_one_minus_albedo() {
+    let walls = [
+        ("[-1, -1, -1]", "[2, 0, 0]", "[0, 2, 0]"),
+        ("[-1, -1, 1]", "[0, 2, 0]", "[2, 0, 0]"),
+        ("[-1, -1, -1]", "[0, 2, 0]", "[0, 0, 2]"),
+        ("[1, -1, -1]", "[0, 0, 2]", "[0, 2, 0]"),
+        ("[-1, -1, -1]", "[0, 0, 2]", "[2, 0, 0]"),
+        ("[-1, 1, -1]", "[2, 0, 0]", "[0, 0, 2]"),
+    ];
+    let mut src = String::from(
+        "[render]\nintegrator = \"path\"\n[camera]\neye = [0.2, -0.3, 0.1]\nlook_at = [1, 0.5, 0.3]\nfov = 90\n\
+         [materials.wall]\ntype = \"diffuse\"\nalbedo = 0.5\n",
+    );
+    for (c, e1, e2) in walls {
+        src += &format!(
+            "[[shapes]]\ntype = \"quad\"\ncorner = {c}\nedge1 = {e1}\nedge2 = {e2}\nmaterial = \"wall\"\nemission = 1\n"
+        );
+    }
+    let (img, stats) = render_src(&src, &Opts { width: 16, height: 16, spp: 64, ..Opts::default() });
+    let m = mean(&img);
+    assert!((m.x - 2.0).abs() < 0.02, "mean radiance {m}, expected 2");
+    // Bounded paths see less: max_depth 2 (emission + one bounce) gives Le (1 + ρ) = 1.5.
+    let l = snell_io::scene::parse(&src.replace("[camera]", "max_depth = 2\n[camera]"), Path::new("t.toml")).unwrap();
+    let (img2, _) = render_loaded(&l, &Opts { width: 16, height: 16, spp: 64, ..Opts::default() });
+    assert!((mean(&img2).x - 1.5).abs() < 0.02, "max_depth 2: {}", mean(&img2));
+    assert!(stats.shadow > 0 && stats.reflection > 0);
+}
+
+#[test]
+fn path_tracer_is_bit_identical_across_thread_counts() {
+    let mut l = snell_io::scene::load(&repo_scene("default.toml")).unwrap();
+    l.settings.integrator = snell_core::integrator::IntegratorKind::Path;
+    let o1 = Opts { width: 24, height: 16, spp: 4, threads: 1, ..Opts::default() };
+    let (a, sa) = render_loaded(&l, &o1);
+    let (b, sb) = render_loaded(&l, &Opts { threads: 2, ..o1 });
+    let bits = |i: &Image| i.pixels.iter().flat_map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+    assert_eq!(bits(&a), bits(&b));
+    assert_eq!(sa, sb);
 }

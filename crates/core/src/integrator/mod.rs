@@ -1,7 +1,9 @@
 //! Integrators: how radiance along a camera ray is computed.
 
+mod path;
 mod whitted;
 
+pub use path::Path;
 pub use whitted::Whitted;
 
 use crate::accel::Accel;
@@ -43,4 +45,47 @@ impl RayStats {
 /// Computes the radiance arriving along a camera ray.
 pub trait Integrator: Sync {
     fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb;
+}
+
+/// The integrator a render uses, chosen once per render (enum dispatch, no virtual calls).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AnyIntegrator {
+    Whitted(Whitted),
+    Path(Path),
+}
+
+impl Integrator for AnyIntegrator {
+    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb {
+        match self {
+            AnyIntegrator::Whitted(w) => w.radiance(world, ray, rng, stats),
+            AnyIntegrator::Path(p) => p.radiance(world, ray, rng, stats),
+        }
+    }
+}
+
+/// Which integrator: the names `whitted` and `path` of scene files and `--integrator`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum IntegratorKind {
+    Whitted,
+    Path,
+}
+
+impl std::str::FromStr for IntegratorKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "whitted" => Ok(IntegratorKind::Whitted),
+            "path" => Ok(IntegratorKind::Path),
+            _ => Err(format!("unknown integrator '{s}' (expected whitted or path)")),
+        }
+    }
+}
+
+impl std::fmt::Display for IntegratorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            IntegratorKind::Whitted => "whitted",
+            IntegratorKind::Path => "path",
+        })
+    }
 }

@@ -8,7 +8,9 @@
 //! - dielectrics spawn *both* a reflected ray (weight `F`) and a refracted ray (weight `1 - F`,
 //!   times `1/η²` for the change of radiance across the boundary); beyond the critical angle
 //!   only the reflected ray, with weight 1 (total internal reflection);
-//! - glazed surfaces spawn the coat's reflection (`F`); the base's share is direct light.
+//! - smooth plastics (glazed) spawn the coat's reflection (`F`); the base's share is direct light;
+//! - thin dielectrics spawn a reflected ray and a straight-through ray;
+//! - rough surfaces (rough conductors, plastics and dielectrics) get direct light only.
 //!
 //! A branch is pruned when it would go deeper than `max_depth` or when the product of weights
 //! from the camera down to it falls below `min_attenuation` (in every channel).
@@ -95,24 +97,42 @@ impl Whitted {
                     throughput,
                 );
             }
-            Material::Conductor { eta, k, roughness: 0.0 } => {
+            Material::Conductor { eta, k, roughness: 0.0, .. } => {
                 let f = conductor_fresnel(cos_o, eta, k);
                 l += self.child(cx, &hit, ng, fresnel::reflect(wo, ns), f, Kind::Reflection, depth, throughput);
             }
-            Material::Glazed { ior, .. } => {
+            Material::Plastic { ior, specular, roughness: 0.0, .. } => {
                 let f = fresnel::dielectric(cos_o, ior);
                 l += self.child(
                     cx,
                     &hit,
                     ng,
                     fresnel::reflect(wo, ns),
-                    Rgb::splat(f),
+                    specular * f,
                     Kind::Reflection,
                     depth,
                     throughput,
                 );
             }
-            Material::Dielectric { ior, transmittance } => {
+            Material::ThinDielectric { ior, transmittance } => {
+                let mut r = fresnel::dielectric(cos_o, ior);
+                if r < 1.0 {
+                    r += (1.0 - r) * (1.0 - r) * r / (1.0 - r * r);
+                }
+                l += self.child(
+                    cx,
+                    &hit,
+                    ng,
+                    fresnel::reflect(wo, ns),
+                    Rgb::splat(r),
+                    Kind::Reflection,
+                    depth,
+                    throughput,
+                );
+                let t = transmittance * (1.0 - r);
+                l += self.child(cx, &hit, ng, -wo, t, Kind::Refraction, depth, throughput);
+            }
+            Material::Dielectric { ior, transmittance, roughness: 0.0, .. } => {
                 // `front`: arriving from outside (the side the geometric normal points to).
                 let eta = if front { ior } else { 1.0 / ior };
                 let cos = ns.dot(wo).clamp(-1.0, 1.0).max(0.0);
@@ -169,6 +189,8 @@ impl Whitted {
 
     /// Direct light from every light source, with shadow rays.
     fn direct<A: Accel>(&self, cx: &mut Ctx<A>, hit: &Intersection, m: &Material, ng: Vec3, ns: Vec3, wo: Vec3) -> Rgb {
+        // A dielectric's frame keeps its outward normal: which side the path is on sets η.
+        let n_bsdf = if m.bsdf(hit.uv).transmits() { hit.ns } else { ns };
         let mut sum = Rgb::ZERO;
         for (li, light) in cx.world.lights.iter().enumerate() {
             let n = light.samples();
@@ -181,7 +203,7 @@ impl Whitted {
                 if ls.wi.dot(ng) <= 0.0 {
                     continue; // Light below the geometric surface.
                 }
-                let f = m.eval_direct(ns, wo, ls.wi, hit.uv);
+                let f = m.eval_direct(n_bsdf, wo, ls.wi, hit.uv);
                 if f.max_element() <= 0.0 || ls.value.max_element() <= 0.0 {
                     continue;
                 }

@@ -1,18 +1,20 @@
-//! Materials as the lecture has them.
+//! Materials: what a scene file names ([`Material`]), and the BSDF each one has at a surface
+//! point ([`bsdf::Bsdf`], with `sample`, `eval` and `pdf`).
 //!
 //! The Whitted integrator treats two kinds of scattering differently: *delta* lobes (ideal
 //! mirror reflection and refraction) spawn new rays of the ray tree, while the *non-delta*
-//! parts (Lambertian and the GGX highlight) are evaluated only against the lights
-//! ([`Material::eval_direct`]).
+//! parts (Lambertian, microfacet lobes) are evaluated only against the lights
+//! ([`Material::eval_direct`]). The path integrator samples all of them.
 
+pub mod bsdf;
 pub mod fresnel;
 pub mod microfacet;
-
-use std::f32::consts::FRAC_1_PI;
 
 use glam::{Vec2, Vec3};
 
 use crate::Rgb;
+use bsdf::{Bsdf, CoatTable, Reflectance};
+use microfacet::{Distribution, Microfacet};
 
 /// A colour that may vary over a surface, looked up by texture coordinates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,74 +51,112 @@ impl From<Rgb> for Texture {
     }
 }
 
-/// A surface material.
+/// A surface material. [`Material::bsdf`] gives its BSDF at a surface point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Material {
     /// Lambertian: `albedo / π`.
     Diffuse { albedo: Texture },
-    /// Lambertian base plus a rough specular highlight (GGX, Fresnel of a dielectric with
-    /// index `ior`, scaled by `specular`) for direct light: a plastic-like surface.
-    Glossy { albedo: Texture, specular: Rgb, roughness: f32, ior: f32 },
-    /// Metal with Fresnel from the complex index of refraction `eta + i·k` per RGB channel.
-    /// `roughness = 0`: ideal mirror (recursive reflection); `roughness > 0`: GGX highlight
-    /// for direct light only.
-    Conductor { eta: Rgb, k: Rgb, roughness: f32 },
+    /// A diffuse base under a dielectric coat of index `ior` (Mitsuba's `plastic` and
+    /// `roughplastic`): the coat reflects Fresnel's share, smooth (`roughness = 0`, an ideal
+    /// mirror lobe) or rough (a microfacet lobe of that `alpha`), scaled by `specular`; the rest
+    /// reaches the base. Build with [`Material::plastic`], which tabulates the coat.
+    Plastic { diffuse: Texture, specular: Rgb, ior: f32, roughness: f32, distribution: Distribution, coat: CoatTable },
+    /// Metal with Fresnel from the complex index of refraction `eta + i·k` per RGB channel:
+    /// an ideal mirror (`roughness = 0`) or microfacet reflection with that `alpha`.
+    Conductor { eta: Rgb, k: Rgb, roughness: f32, distribution: Distribution },
     /// The lecture's alternative: a mirror with a constant reflectance at every angle.
     Mirror { reflectance: Rgb },
-    /// Smooth dielectric (glass, water, diamond): reflects `F` and refracts `1 - F` (times
-    /// `transmittance`), with total internal reflection.
-    Dielectric { ior: f32, transmittance: Rgb },
-    /// A smooth dielectric coat of index `ior` over a Lambertian `base`: the coat reflects `F`
-    /// specularly; the transmitted `1 - F` is shaded by the base.
-    Glazed { ior: f32, base: Rgb },
+    /// Dielectric interface of index `ior` inside (glass, water, diamond): reflects `F` and
+    /// refracts `1 - F` (times `transmittance`), with total internal reflection; smooth
+    /// (`roughness = 0`) or rough (Walter et al. 2007).
+    Dielectric { ior: f32, transmittance: Rgb, roughness: f32, distribution: Distribution },
+    /// A thin pane of index `ior`: reflects, and transmits without bending (all internal
+    /// reflections summed).
+    ThinDielectric { ior: f32, transmittance: Rgb },
+}
+
+#[inline]
+fn microfacet(roughness: f32, distribution: Distribution) -> Option<Microfacet> {
+    (roughness > 0.0).then(|| Microfacet::new(distribution, roughness))
 }
 
 impl Material {
+    /// A plastic, with its coat tabulated (see [`CoatTable`]).
+    pub fn plastic(diffuse: Texture, specular: Rgb, ior: f32, roughness: f32, distribution: Distribution) -> Material {
+        let coat = CoatTable::new(ior, microfacet(roughness, distribution));
+        Material::Plastic { diffuse, specular, ior, roughness, distribution, coat }
+    }
+
+    /// The BSDF at a point with texture coordinates `uv`, in the local shading frame.
+    #[inline]
+    pub fn bsdf(&self, uv: Vec2) -> Bsdf<'_> {
+        match self {
+            Material::Diffuse { albedo } => Bsdf::Diffuse { albedo: albedo.eval(uv) },
+            Material::Plastic { diffuse, specular, ior, roughness, distribution, coat } => Bsdf::Plastic {
+                diffuse: diffuse.eval(uv),
+                specular: *specular,
+                eta: *ior,
+                mf: microfacet(*roughness, *distribution),
+                coat,
+            },
+            Material::Conductor { eta, k, roughness, distribution } => Bsdf::Conductor {
+                reflectance: Reflectance::Complex { eta: *eta, k: *k },
+                mf: microfacet(*roughness, *distribution),
+            },
+            Material::Mirror { reflectance } => {
+                Bsdf::Conductor { reflectance: Reflectance::Constant(*reflectance), mf: None }
+            }
+            Material::Dielectric { ior, transmittance, roughness, distribution } => {
+                Bsdf::Dielectric { eta: *ior, mf: microfacet(*roughness, *distribution), tint: *transmittance }
+            }
+            Material::ThinDielectric { ior, transmittance } => Bsdf::ThinDielectric { eta: *ior, tint: *transmittance },
+        }
+    }
+
     /// Whether the material has a non-delta part that direct lighting must evaluate.
     pub fn has_direct(&self) -> bool {
-        match self {
-            Material::Diffuse { .. } | Material::Glossy { .. } | Material::Glazed { .. } => true,
-            Material::Conductor { roughness, .. } => *roughness > 0.0,
-            Material::Mirror { .. } | Material::Dielectric { .. } => false,
-        }
+        !self.bsdf(Vec2::ZERO).is_delta()
     }
 
     /// The diffuse albedo at `uv`, for the ambient term.
     pub fn diffuse_albedo(&self, uv: Vec2) -> Rgb {
         match self {
-            Material::Diffuse { albedo } | Material::Glossy { albedo, .. } => albedo.eval(uv),
-            Material::Glazed { base, .. } => *base,
+            Material::Diffuse { albedo } | Material::Plastic { diffuse: albedo, .. } => albedo.eval(uv),
             _ => Rgb::ZERO,
         }
     }
 
-    /// The non-delta BSDF times the cosine, `f(wo, wi) |n · wi|`, for light arriving from `wi`.
-    /// `n` is the shading normal on the side of `wo`, `uv` the texture coordinates.
-    /// Zero if `wi` is below the surface.
+    /// The non-delta BSDF times the cosine, `f(wo, wi) |n · wi|`, for light arriving from `wi`
+    /// (world space). `n` is the shading normal on the side of `wo`, `uv` the texture
+    /// coordinates.
     pub fn eval_direct(&self, n: Vec3, wo: Vec3, wi: Vec3, uv: Vec2) -> Rgb {
-        let cos_i = n.dot(wi);
-        if cos_i <= 0.0 || n.dot(wo) <= 0.0 {
-            return Rgb::ZERO;
-        }
-        match *self {
-            Material::Diffuse { albedo } => albedo.eval(uv) * (FRAC_1_PI * cos_i),
-            Material::Glossy { albedo, specular, roughness, ior } => {
-                let (spec, cos_h) = microfacet::cook_torrance(n, wo, wi, roughness.max(1e-3));
-                let f = fresnel::dielectric(cos_h, ior);
-                // The base sees only light the coat lets through, on the way in and out.
-                let t = (1.0 - fresnel::dielectric(cos_i, ior)) * (1.0 - fresnel::dielectric(n.dot(wo), ior));
-                (albedo.eval(uv) * (FRAC_1_PI * t) + specular * (spec * f)) * cos_i
-            }
-            Material::Conductor { eta, k, roughness } => {
-                let (spec, cos_h) = microfacet::cook_torrance(n, wo, wi, roughness.max(1e-3));
-                conductor_fresnel(cos_h, eta, k) * (spec * cos_i)
-            }
-            Material::Glazed { ior, base } => {
-                let t = (1.0 - fresnel::dielectric(cos_i, ior)) * (1.0 - fresnel::dielectric(n.dot(wo), ior));
-                base * (FRAC_1_PI * t * cos_i)
-            }
-            Material::Mirror { .. } | Material::Dielectric { .. } => Rgb::ZERO,
-        }
+        let f = Frame::new(n);
+        self.bsdf(uv).eval(f.to_local(wo), f.to_local(wi))
+    }
+}
+
+/// An orthonormal shading frame: `n` is the local `z` axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    pub s: Vec3,
+    pub t: Vec3,
+    pub n: Vec3,
+}
+
+impl Frame {
+    pub fn new(n: Vec3) -> Frame {
+        let (s, t) = crate::geometry::orthonormal_basis(n);
+        Frame { s, t, n }
+    }
+
+    #[inline]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
+    }
+
+    #[inline]
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.s * v.x + self.t * v.y + self.n * v.z
     }
 }
 
@@ -167,13 +207,13 @@ mod tests {
         let m = Material::Diffuse { albedo: Rgb::splat(0.5).into() };
         let wi = Vec3::new(0.6, 0.0, 0.8);
         let v = m.eval_direct(Vec3::Z, Vec3::Z, wi, Vec2::ZERO);
-        assert!((v.x - 0.5 * FRAC_1_PI * 0.8).abs() < 1e-7);
+        assert!((v.x - 0.5 * std::f32::consts::FRAC_1_PI * 0.8).abs() < 1e-7);
         assert_eq!(m.eval_direct(Vec3::Z, Vec3::Z, -wi, Vec2::ZERO), Rgb::ZERO);
     }
 
     #[test]
     fn glossy_highlight_peaks_in_mirror_direction() {
-        let m = Material::Glossy { albedo: Rgb::ZERO.into(), specular: Rgb::ONE, roughness: 0.1, ior: 1.5 };
+        let m = Material::plastic(Rgb::ZERO.into(), Rgb::ONE, 1.5, 0.1, Distribution::Ggx);
         let wo = Vec3::new(0.5, 0.0, 0.866).normalize();
         let mirror = fresnel::reflect(wo, Vec3::Z);
         let off = Vec3::new(-0.2, 0.3, 0.93).normalize();
@@ -186,9 +226,15 @@ mod tests {
     fn rough_materials_do_not_create_energy() {
         // Directional albedo ∫ f cos dω ≤ 1 by quadrature, for a few view angles.
         let mats = [
-            Material::Glossy { albedo: Rgb::ONE.into(), specular: Rgb::ONE, roughness: 0.3, ior: 1.5 },
-            Material::Conductor { eta: Rgb::splat(0.2), k: Rgb::splat(3.0), roughness: 0.2 },
-            Material::Glazed { ior: 1.5, base: Rgb::ONE },
+            Material::plastic(Rgb::ONE.into(), Rgb::ONE, 1.5, 0.3, Distribution::Ggx),
+            Material::plastic(Rgb::ONE.into(), Rgb::ONE, 1.5, 0.3, Distribution::Beckmann),
+            Material::Conductor {
+                eta: Rgb::splat(0.2),
+                k: Rgb::splat(3.0),
+                roughness: 0.2,
+                distribution: Distribution::Ggx,
+            },
+            Material::plastic(Rgb::ONE.into(), Rgb::ONE, 1.5, 0.0, Distribution::Ggx),
         ];
         for m in mats {
             for deg in [0.0f32, 45.0, 80.0] {

@@ -1,0 +1,186 @@
+//! Unidirectional path tracing with next-event estimation and multiple importance sampling
+//! (Veach 1997; the structure of pbrt-v4's `PathIntegrator` and Mitsuba 3's `path`).
+//!
+//! At every vertex: emission seen along the path (weighted against light sampling by the power
+//! heuristic, unless it was reached through a delta lobe or straight from the camera); one
+//! light chosen in proportion to its power and sampled, with a shadow ray (weighted against
+//! BSDF sampling, unless the light or the BSDF is a delta); then the BSDF is sampled for the
+//! next direction. Russian roulette from `rr_depth` on, with Mitsuba's survival probability
+//! `min(max(β) η², 0.95)`.
+//!
+//! Depth counts path segments, as Mitsuba's `max_depth` does: 1 sees only emitters, 2 adds
+//! direct light, and so on.
+
+use glam::Vec3;
+
+use super::{Integrator, RayStats};
+use crate::accel::Accel;
+use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
+use crate::material::Frame;
+use crate::sampling::Pcg32;
+use crate::scene::World;
+use crate::Rgb;
+
+/// Path tracing with next-event estimation and MIS.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Path {
+    /// Longest path in segments (camera to light); `u32::MAX`: unbounded.
+    pub max_depth: u32,
+    /// Russian roulette starts at this depth.
+    pub rr_depth: u32,
+}
+
+impl Default for Path {
+    fn default() -> Self {
+        Path { max_depth: u32::MAX, rr_depth: 5 }
+    }
+}
+
+/// The power heuristic with β = 2.
+#[inline]
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2.is_infinite() {
+        1.0
+    } else if a2 + b2 > 0.0 {
+        a2 / (a2 + b2)
+    } else {
+        0.0
+    }
+}
+
+impl Integrator for Path {
+    fn radiance<A: Accel>(&self, world: &World<A>, camera_ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb {
+        let scene = world.scene;
+        let mut l = Rgb::ZERO;
+        let mut beta = Rgb::ONE;
+        let mut ray = *camera_ray;
+        // The BSDF pdf of the last bounce and whether it was a delta lobe (the camera counts
+        // as one: what it sees directly is not light-sampled).
+        let (mut prev_pdf, mut prev_delta) = (0.0f32, true);
+        let mut prev_p = ray.o;
+        let mut eta_scale = 1.0f32;
+        let mut depth = 0u32;
+        loop {
+            let Some(hit) = world.intersect(&ray, f32::INFINITY) else {
+                l += beta * scene.background;
+                break;
+            };
+            let obj = &scene.objects[hit.object as usize];
+            let wo_world = (-ray.d).normalize();
+            let front = wo_world.dot(hit.ng) > 0.0;
+            if front && obj.emission != Rgb::ZERO {
+                let w = match (prev_delta, world.light_of(hit.object)) {
+                    (false, Some(li)) => {
+                        let light_pdf = world.light_probability(li) * world.lights[li].pdf(prev_p, hit.p, hit.ng);
+                        power_heuristic(prev_pdf, light_pdf)
+                    }
+                    _ => 1.0,
+                };
+                l += beta * obj.emission * w;
+            }
+            if depth + 1 >= self.max_depth {
+                break;
+            }
+            let material = &scene.materials[obj.material];
+            let bsdf = material.bsdf(hit.uv);
+            // Opaque surfaces are two-sided: turn the frame to the side the path arrives from.
+            // Dielectrics keep the outward normal, whose side tells inside from outside.
+            let (mut ng, mut ns) = (hit.ng, hit.ns);
+            if !bsdf.transmits() && !front {
+                (ng, ns) = (-ng, -ns);
+            }
+            if !bsdf.transmits() && ns.dot(wo_world) <= 0.0 {
+                ns = ng;
+            }
+            let frame = Frame::new(ns);
+            let wo = frame.to_local(wo_world);
+
+            // Next-event estimation.
+            if !bsdf.is_delta() {
+                if let Some((li, p_choose)) = world.choose_light(rng.next_f32()) {
+                    let u = rng.next_2d();
+                    if let Some(ls) = world.lights[li].sample(hit.p, u) {
+                        let wi = frame.to_local(ls.wi);
+                        // Reflection must stay on the side of the geometric normal it started on,
+                        // transmission must cross it.
+                        let same_side = (ls.wi.dot(ng) > 0.0) == (wo_world.dot(ng) > 0.0);
+                        let f = if same_side == (wi.z * wo.z > 0.0) { bsdf.eval(wo, wi) } else { Rgb::ZERO };
+                        if f.max_element() > 0.0 && ls.value.max_element() > 0.0 {
+                            stats.shadow += 1;
+                            let blocked = if ls.infinite {
+                                world.occluded(&spawn_ray(hit.p, ng, ls.wi), f32::INFINITY)
+                            } else {
+                                let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p, ls.n);
+                                world.occluded(&r, t_max)
+                            };
+                            if !blocked {
+                                let w = if ls.pdf > 0.0 {
+                                    power_heuristic(ls.pdf * p_choose, bsdf.pdf(wo, wi))
+                                } else {
+                                    1.0
+                                };
+                                l += beta * f * ls.value * (w / p_choose);
+                            }
+                        }
+                    }
+                }
+            }
+
+            // BSDF sampling.
+            let uc = rng.next_f32();
+            let u = rng.next_2d();
+            let Some(bs) = bsdf.sample(wo, uc, u) else { break };
+            let wi_world = frame.to_world(bs.wi);
+            // Shading normals can send a sample through the geometric surface the wrong way.
+            let crosses = (wi_world.dot(ng) > 0.0) != (wo_world.dot(ng) > 0.0);
+            if crosses != (bs.wi.z * wo.z < 0.0) {
+                break;
+            }
+            beta *= bs.weight;
+            eta_scale *= bs.eta_scale(&bsdf, wo);
+            (prev_pdf, prev_delta, prev_p) = (bs.pdf, bs.delta, hit.p);
+            if crosses {
+                stats.refraction += 1;
+            } else {
+                stats.reflection += 1;
+            }
+            ray = spawn_ray(hit.p, ng, wi_world);
+            depth += 1;
+            if depth >= self.rr_depth {
+                let q = (beta.max_element() * eta_scale).min(0.95);
+                if rng.next_f32() >= q {
+                    break;
+                }
+                beta /= q;
+            }
+            if beta.max_element() <= 0.0 || !beta.is_finite() {
+                break;
+            }
+        }
+        l
+    }
+}
+
+impl crate::material::bsdf::BsdfSample {
+    /// `η²` of the boundary this sample crossed (1 for reflection), which Russian roulette
+    /// takes out of the throughput so that paths inside glass are not killed for the `1/η²`.
+    #[inline]
+    fn eta_scale(&self, bsdf: &crate::material::bsdf::Bsdf, wo: Vec3) -> f32 {
+        let e = bsdf.eta_across(wo, self.wi);
+        e * e
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn power_heuristic_weights_sum_to_one() {
+        for (a, b) in [(1.0f32, 2.0f32), (0.3, 0.0), (5.0, 5.0)] {
+            assert!((power_heuristic(a, b) + power_heuristic(b, a) - 1.0).abs() < 1e-6);
+        }
+        assert_eq!(power_heuristic(f32::INFINITY, 1.0), 1.0);
+    }
+}
