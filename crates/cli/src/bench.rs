@@ -210,6 +210,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         .context("internal: camera")?,
         background: Rgb::ZERO,
         ambient: Rgb::ZERO,
+        light_selection: Default::default(),
     };
     let Geometry::Mesh(mesh) = &scene.geometries[0] else { unreachable!("built above") };
     let threads = args.threads.unwrap_or(0) as usize;

@@ -38,8 +38,12 @@ enum Command {
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// Scene file (.toml) or mesh (.obj, .ply). Without it, the built-in default scene.
+    /// Scene file (.toml, or Mitsuba 3 .xml) or mesh (.obj, .ply). Without it, the built-in
+    /// default scene.
     scene: Option<PathBuf>,
+    /// Mitsuba scenes: set a parameter (`$name`), overriding the file's <default>.
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
+    define: Vec<(String, String)>,
     /// Output image; the extension picks the format: .png (8-bit sRGB) or .exr (linear float).
     #[arg(short, long, default_value = "snell.png")]
     output: PathBuf,
@@ -101,6 +105,13 @@ fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
     s.parse()
 }
 
+fn parse_define(s: &str) -> Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((k, v)) if !k.is_empty() => Ok((k.to_string(), v.to_string())),
+        _ => Err(format!("'{s}': expected NAME=VALUE")),
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -116,22 +127,29 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(scene: Option<&Path>) -> Result<LoadedScene> {
+fn load(scene: Option<&Path>, defines: &[(String, String)]) -> Result<LoadedScene> {
     let Some(path) = scene else {
         return Ok(snell_io::scene::parse(DEFAULT_SCENE, Path::new("<built-in default scene>"))?);
     };
     let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
+    if !defines.is_empty() && ext.as_deref() != Some("xml") {
+        bail!("-D applies to Mitsuba scenes (.xml) only");
+    }
     Ok(match ext.as_deref() {
         Some("toml") => snell_io::scene::load(path)?,
+        Some("xml") => snell_io::mitsuba::load(path, defines)?,
         Some("obj") | Some("ply") => snell_io::scene::from_mesh(path)?,
-        _ => bail!("{}: unsupported scene format (expected .toml, .obj or .ply)", path.display()),
+        _ => bail!("{}: unsupported scene format (expected .toml, .xml, .obj or .ply)", path.display()),
     })
 }
 
 fn cmd_render(args: RenderArgs) -> Result<()> {
     snell_io::image_out::check_output(&args.output)?;
     let t_load = Instant::now();
-    let loaded = load(args.scene.as_deref())?;
+    let loaded = load(args.scene.as_deref(), &args.define)?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
+    }
     let load_s = t_load.elapsed().as_secs_f64();
     let mut scene = loaded.scene;
     let s = loaded.settings;
@@ -143,6 +161,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         seed: args.seed.unwrap_or(s.seed),
         threads: args.threads.unwrap_or(0) as usize,
         filter: s.filter.clone(),
+        reconstruction: s.reconstruction,
     };
     settings.check().map_err(anyhow::Error::msg)?;
     let integrator = snell_io::scene::SceneSettings {

@@ -39,6 +39,28 @@ impl Filter {
         }
     }
 
+    /// The filter's weight at `offset` from a pixel centre (separable, not normalised).
+    pub fn eval(&self, offset: Vec2) -> f32 {
+        self.eval_1d(offset.x) * self.eval_1d(offset.y)
+    }
+
+    /// The weight of one axis: [`Filter::eval`] is the product of two.
+    pub fn eval_1d(&self, x: f32) -> f32 {
+        let x = x.abs();
+        match self {
+            Filter::Box { radius } => (x <= *radius) as u8 as f32,
+            Filter::Tent { radius } => (1.0 - x / radius).max(0.0),
+            Filter::Gaussian { radius, sigma, .. } => {
+                let g = |x: f32| (-(x * x) / (2.0 * sigma * sigma)).exp();
+                if x >= *radius {
+                    0.0
+                } else {
+                    (g(x) - g(*radius)).max(0.0)
+                }
+            }
+        }
+    }
+
     /// Offset from the pixel centre for uniform `u ∈ [0,1)²`.
     pub fn sample(&self, u: Vec2) -> Vec2 {
         Vec2::new(self.sample_1d(u.x), self.sample_1d(u.y))
@@ -79,6 +101,16 @@ mod tests {
                 mean += o / n as f32;
             }
             assert!(mean.length() < 1e-2, "{f:?} mean {mean}");
+        }
+    }
+
+    #[test]
+    fn weights_fall_off_to_zero_at_the_radius() {
+        for f in [Filter::Box { radius: 0.5 }, Filter::Tent { radius: 1.0 }, Filter::gaussian(2.0, 0.5)] {
+            let r = f.radius();
+            assert!(f.eval(Vec2::ZERO) > 0.0);
+            assert_eq!(f.eval(Vec2::new(r * 1.01, 0.0)), 0.0);
+            assert!(f.eval(Vec2::new(0.3 * r, 0.0)) <= f.eval(Vec2::ZERO));
         }
     }
 

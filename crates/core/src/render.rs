@@ -24,11 +24,33 @@ pub struct RenderSettings {
     /// Worker threads; 0 means one per core.
     pub threads: usize,
     pub filter: Filter,
+    pub reconstruction: Reconstruction,
+}
+
+/// How samples become pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Reconstruction {
+    /// Filter importance sampling (pbrt-v4): each sample lands at an offset distributed like the
+    /// filter and counts for its own pixel only; pixels are plain averages.
+    #[default]
+    ImportanceSampled,
+    /// Splatting (Mitsuba 3, pbrt-v3): samples are uniform over their pixel and add to every pixel
+    /// whose filter covers them, weighted by the filter; pixels are `Σ w L / Σ w`. Neighbouring
+    /// pixels share samples, so wide filters give smoother (correlated) noise.
+    Splat,
 }
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { width: 640, height: 480, spp: 16, seed: 0, threads: 0, filter: Filter::default() }
+        RenderSettings {
+            width: 640,
+            height: 480,
+            spp: 16,
+            seed: 0,
+            threads: 0,
+            filter: Filter::default(),
+            reconstruction: Reconstruction::default(),
+        }
     }
 }
 
@@ -57,6 +79,8 @@ impl RenderSettings {
 }
 
 const TILE: u32 = 16;
+/// Splatting reaches at most this many pixels beyond a sample's own (filter radius 16.5).
+const MAX_SPLAT_MARGIN: u32 = 16;
 
 /// Renders the world. `progress(pixels)` is called as tiles finish (from worker threads).
 /// Returns the image and the summed ray statistics.
@@ -69,20 +93,54 @@ pub fn render<A: Accel, I: Integrator>(
     let (w, h) = (settings.width, settings.height);
     let tiles: Vec<(u32, u32)> =
         (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
+    let splat = settings.reconstruction == Reconstruction::Splat;
+    // Splatting: how far beyond its tile a sample's filter reaches, in pixels.
+    let m = if splat { ((settings.filter.radius() - 0.5).max(0.0).ceil() as u32).min(MAX_SPLAT_MARGIN) } else { 0 };
     let work = || {
         tiles
             .par_iter()
             .map(|&(x0, y0)| {
                 let mut stats = RayStats::default();
                 let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-                let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+                // The tile's pixels plus a margin of m: Σ w·L and Σ w per pixel.
+                let bw = (x1 - x0 + 2 * m) as usize;
+                let mut acc = vec![(Rgb::ZERO, 0.0f32); bw * (y1 - y0 + 2 * m) as usize];
                 for y in y0..y1 {
                     for x in x0..x1 {
-                        px.push(render_pixel(world, integrator, settings, x, y, &mut stats));
+                        render_pixel(world, integrator, settings, x, y, &mut stats, &mut |film, l| {
+                            if !splat {
+                                let i = (y - y0) as usize * bw + (x - x0) as usize;
+                                acc[i].0 += l;
+                                acc[i].1 += 1.0;
+                                return;
+                            }
+                            let (lo_x, hi_x) = (x.saturating_sub(m), (x + m).min(w - 1));
+                            let (lo_y, hi_y) = (y.saturating_sub(m), (y + m).min(h - 1));
+                            // The filter is separable: one weight per column and per row.
+                            let mut wx = [0.0f32; 2 * MAX_SPLAT_MARGIN as usize + 1];
+                            for (k, px) in (lo_x..=hi_x).enumerate() {
+                                wx[k] = settings.filter.eval_1d(film.x - (px as f32 + 0.5));
+                            }
+                            for py in lo_y..=hi_y {
+                                let wy = settings.filter.eval_1d(film.y - (py as f32 + 0.5));
+                                if wy == 0.0 {
+                                    continue;
+                                }
+                                let row = (py + m - y0) as usize * bw;
+                                for (k, px) in (lo_x..=hi_x).enumerate() {
+                                    let wt = wx[k] * wy;
+                                    if wt != 0.0 {
+                                        let i = row + (px + m - x0) as usize;
+                                        acc[i].0 += l * wt;
+                                        acc[i].1 += wt;
+                                    }
+                                }
+                            }
+                        });
                     }
                 }
-                progress(px.len() as u64);
-                (x0, y0, x1, px, stats)
+                progress(((x1 - x0) * (y1 - y0)) as u64);
+                (x0, y0, acc, stats)
             })
             .collect::<Vec<_>>()
     };
@@ -90,19 +148,31 @@ pub fn render<A: Accel, I: Integrator>(
         Ok(pool) => pool.install(work),
         Err(_) => work(),
     };
-    let mut image = Image::new(w, h);
+    // Tiles are merged in a fixed order, so the sums (and the image) do not depend on threads.
+    let mut sums = vec![(Rgb::ZERO, 0.0f32); (w * h) as usize];
     let mut stats = RayStats::default();
-    for (x0, y0, x1, px, s) in results {
-        let tw = (x1 - x0) as usize;
-        for (i, p) in px.into_iter().enumerate() {
-            let (x, y) = (x0 as usize + i % tw, y0 as usize + i / tw);
-            image.pixels[y * w as usize + x] = p;
+    for (x0, y0, acc, s) in results {
+        let bw = (TILE.min(w - x0) + 2 * m) as usize;
+        for (i, &(l, wt)) in acc.iter().enumerate() {
+            let (bx, by) = ((i % bw) as i64, (i / bw) as i64);
+            let (x, y) = (x0 as i64 + bx - m as i64, y0 as i64 + by - m as i64);
+            if wt != 0.0 && (0..w as i64).contains(&x) && (0..h as i64).contains(&y) {
+                let p = &mut sums[y as usize * w as usize + x as usize];
+                p.0 += l;
+                p.1 += wt;
+            }
         }
         stats.add(&s);
+    }
+    let mut image = Image::new(w, h);
+    for (p, (l, wt)) in image.pixels.iter_mut().zip(sums) {
+        *p = if wt > 0.0 { l / wt } else { Rgb::ZERO };
     }
     (image, stats)
 }
 
+/// Traces the samples of pixel `(x, y)`, handing each one's film position and radiance to
+/// `sink`.
 fn render_pixel<A: Accel, I: Integrator>(
     world: &World<A>,
     integrator: &I,
@@ -110,22 +180,24 @@ fn render_pixel<A: Accel, I: Integrator>(
     x: u32,
     y: u32,
     stats: &mut RayStats,
-) -> Rgb {
+    sink: &mut impl FnMut(Vec2, Rgb),
+) {
     let pixel = y as u64 * s.width as u64 + x as u64;
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
-    let mut sum = Rgb::ZERO;
     for i in 0..s.spp {
         let mut rng = Pcg32::for_sample(s.seed, pixel, i as u64);
         let film_u = stratified_2d(i, s.spp, key, &mut rng);
         let lens_u = stratified_2d(i, s.spp, key ^ 0x5bd1_e995, &mut rng);
-        let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + s.filter.sample(film_u);
+        let offset = match s.reconstruction {
+            Reconstruction::ImportanceSampled => s.filter.sample(film_u),
+            Reconstruction::Splat => film_u - Vec2::splat(0.5),
+        };
+        let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
         let ray = world.scene.camera.ray(film, s.width, s.height, lens_u);
         stats.camera += 1;
         let l = integrator.radiance(world, &ray, &mut rng, stats);
-        // A non-finite sample (NaN from a degenerate configuration) would poison the pixel.
-        if l.is_finite() {
-            sum += l;
-        }
+        // A non-finite sample (NaN from a degenerate configuration) would poison the pixel;
+        // it still counts (as black), so that the estimate stays unbiased where it is finite.
+        sink(film, if l.is_finite() { l } else { Rgb::ZERO });
     }
-    sum / s.spp.max(1) as f32
 }

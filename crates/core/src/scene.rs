@@ -54,6 +54,18 @@ pub struct Scene {
     pub background: Rgb,
     /// Whitted's ambient term: constant radiance that reaches every diffuse surface unshadowed.
     pub ambient: Rgb,
+    /// How the path tracer picks the light to sample at each vertex.
+    pub light_selection: LightSelection,
+}
+
+/// How a light is chosen for next-event estimation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum LightSelection {
+    /// In proportion to emitted power (pbrt-v4's power light sampler).
+    #[default]
+    Power,
+    /// Every light equally often (Mitsuba 3's default).
+    Uniform,
 }
 
 impl Scene {
@@ -368,7 +380,10 @@ impl<'s, A: Accel> World<'s, A> {
         let radius = 0.5 * scene.aabb().extent().length();
         let radius = if radius.is_finite() { radius } else { 1.0 };
         let light_cdf = crate::sampling::build_cdf(lights.iter().map(|l| {
-            let p = l.power(radius);
+            let p = match scene.light_selection {
+                LightSelection::Power => l.power(radius),
+                LightSelection::Uniform => 1.0,
+            };
             if p.is_finite() && p > 0.0 {
                 p
             } else {

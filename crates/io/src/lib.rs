@@ -1,12 +1,14 @@
 //! # snell-io
 //!
-//! Everything that touches files: Snell's native TOML scene format, OBJ and PLY meshes, and
+//! Everything that touches files: Snell's native TOML scene format, Mitsuba 3 XML scenes, OBJ
+//! and PLY meshes, and
 //! PNG / EXR output. Every reader reports bad input as an [`Error`] naming the file and the
 //! line and column (text) or byte offset (binary) and what was wrong; nothing here panics on
 //! user input.
 
 mod error;
 pub mod image_out;
+pub mod mitsuba;
 pub mod obj;
 pub mod ply;
 pub mod rays;

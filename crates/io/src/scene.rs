@@ -19,7 +19,8 @@ use snell_core::integrator::{AnyIntegrator, IntegratorKind, Path as PathTracer, 
 use snell_core::light::Light;
 use snell_core::material::microfacet::Distribution;
 use snell_core::material::{self, Material};
-use snell_core::scene::{Geometry, Object, Scene};
+use snell_core::render::Reconstruction;
+use snell_core::scene::{Geometry, LightSelection, Object, Scene};
 use snell_core::shape::{Mesh, Sphere};
 use snell_core::Rgb;
 use toml::Spanned;
@@ -42,6 +43,7 @@ pub struct SceneSettings {
     pub rr_depth: u32,
     pub accel: AccelKind,
     pub filter: Filter,
+    pub reconstruction: Reconstruction,
 }
 
 impl Default for SceneSettings {
@@ -57,6 +59,7 @@ impl Default for SceneSettings {
             rr_depth: 5,
             accel: AccelKind::DEFAULT,
             filter: Filter::default(),
+            reconstruction: Reconstruction::default(),
         }
     }
 }
@@ -85,6 +88,8 @@ pub struct LoadedScene {
     /// When the camera was placed automatically: the box it frames, so that a caller that
     /// changes the image size can re-frame it with [`auto_camera`] for the new aspect ratio.
     pub frame: Option<Aabb>,
+    /// What the reader ignored or approximated, each with file, line and column.
+    pub warnings: Vec<String>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -239,6 +244,8 @@ struct RenderDef {
     filter_sigma: S<Num>,
     background: Option<Color>,
     ambient: Option<Color>,
+    light_selection: S<String>,
+    reconstruction: S<String>,
 }
 
 #[derive(Deserialize)]
@@ -461,7 +468,17 @@ pub fn parse(src: &str, path: &Path) -> Result<LoadedScene, Error> {
             .ok_or_else(|| Error::new(path, "internal: default camera"))?,
         background,
         ambient,
+        light_selection: Default::default(),
     };
+    if let Some(ls) = file.render.as_ref().and_then(|r| r.light_selection.as_ref()) {
+        scene.light_selection = match ls.get_ref().as_str() {
+            "power" => LightSelection::Power,
+            "uniform" => LightSelection::Uniform,
+            other => {
+                return Err(cx.err(ls.span(), format!("unknown light_selection '{other}' (expected power or uniform)")))
+            }
+        };
+    }
     let frame = file.camera.is_none().then(|| scene.aabb());
     scene.camera = match (&file.camera, frame) {
         (Some(c), _) => camera_def(&cx, c)?,
@@ -470,7 +487,7 @@ pub fn parse(src: &str, path: &Path) -> Result<LoadedScene, Error> {
         (None, None) => return Err(Error::new(path, "internal: no camera")),
     };
     scene.check().map_err(|e| Error::new(path, e))?;
-    Ok(LoadedScene { scene, settings, frame })
+    Ok(LoadedScene { scene, settings, frame, warnings: Vec::new() })
 }
 
 fn render_settings(cx: &Ctx, r: Option<&RenderDef>) -> Result<SceneSettings, Error> {
@@ -490,6 +507,17 @@ fn render_settings(cx: &Ctx, r: Option<&RenderDef>) -> Result<SceneSettings, Err
     s.rr_depth = cx.int(&r.rr_depth, 0, 100_000, "rr_depth", s.rr_depth as i64)? as u32;
     if let Some(a) = &r.accel {
         s.accel = a.get_ref().parse().map_err(|e: String| cx.err(a.span(), e))?;
+    }
+    if let Some(rc) = &r.reconstruction {
+        s.reconstruction = match rc.get_ref().as_str() {
+            "importance" => Reconstruction::ImportanceSampled,
+            "splat" => Reconstruction::Splat,
+            other => {
+                return Err(
+                    cx.err(rc.span(), format!("unknown reconstruction '{other}' (expected importance or splat)"))
+                )
+            }
+        };
     }
     let radius = |d: f32| cx.num(&r.filter_radius, 0.0, 16.0, "filter_radius", d);
     s.filter = match r.filter.as_ref().map(|f| (f.get_ref().as_str(), f.span())) {
@@ -971,9 +999,10 @@ pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
             .ok_or_else(|| Error::new(path, "internal: default camera"))?,
         background: Rgb::new(0.2, 0.22, 0.25),
         ambient: Rgb::splat(0.08),
+        light_selection: Default::default(),
     };
     // Frame the mesh itself, not the floor.
     scene.camera = auto_camera(b, settings.width, settings.height)
         .ok_or_else(|| Error::new(path, "the mesh has no extent to frame"))?;
-    Ok(LoadedScene { scene, settings, frame: Some(b) })
+    Ok(LoadedScene { scene, settings, frame: Some(b), warnings: Vec::new() })
 }

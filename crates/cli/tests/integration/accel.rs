@@ -30,6 +30,7 @@ pub fn scene_of(geometries: Vec<Geometry>, objects: Vec<Object>) -> Scene {
         camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 40.0 }).unwrap(),
         background: Rgb::ZERO,
         ambient: Rgb::ZERO,
+        light_selection: Default::default(),
     }
 }
 

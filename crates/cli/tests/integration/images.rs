@@ -39,6 +39,7 @@ pub fn render_loaded(l: &LoadedScene, o: &Opts) -> (Image, RayStats) {
         seed: l.settings.seed,
         threads: o.threads,
         filter: l.settings.filter.clone(),
+        reconstruction: l.settings.reconstruction,
     };
     let integrator = snell_io::scene::SceneSettings {
         max_depth: o.max_depth.or(l.settings.max_depth),

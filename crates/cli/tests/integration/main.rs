@@ -5,4 +5,5 @@ mod bad_input;
 mod bench;
 mod common;
 mod images;
+mod mitsuba;
 mod shared_scenes;
