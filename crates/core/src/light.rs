@@ -23,6 +23,122 @@ pub enum Light {
     Directional { direction: Vec3, irradiance: Rgb },
     /// An emissive object.
     Area(AreaLight),
+    /// Light from infinitely far away in every direction: constant, or an image.
+    Environment(Environment),
+}
+
+/// An environment: radiance `scale` from every direction, times an equirectangular image if
+/// there is one. Image convention (Mitsuba's): in the environment's own frame `+y` is up (the
+/// top row), and `u = atan2(x, -z) / 2π` runs once around.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Environment {
+    pub scale: Rgb,
+    pub map: Option<EnvMap>,
+    /// Environment frame to world (a rotation); its inverse is the transpose.
+    pub to_world: glam::Mat3,
+}
+
+/// An equirectangular radiance image with its sampling distribution (luminance × sin θ).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvMap {
+    pub width: usize,
+    pub height: usize,
+    /// Row by row, top (`+y`) first.
+    pub pixels: Vec<Rgb>,
+    distribution: Option<crate::sampling::Distribution2D>,
+}
+
+impl EnvMap {
+    /// `None` if the size does not match the pixels or a value is negative or not finite.
+    pub fn new(width: usize, height: usize, pixels: Vec<Rgb>) -> Option<EnvMap> {
+        if width == 0 || height == 0 || pixels.len() != width * height {
+            return None;
+        }
+        if pixels.iter().any(|p| !p.is_finite() || p.min_element() < 0.0) {
+            return None;
+        }
+        let weights: Vec<f32> = pixels
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let theta = ((i / width) as f32 + 0.5) / height as f32 * PI;
+                (p.element_sum() / 3.0) * theta.sin()
+            })
+            .collect();
+        let distribution = crate::sampling::Distribution2D::new(width, height, &weights);
+        Some(EnvMap { width, height, pixels, distribution })
+    }
+
+    fn lookup(&self, uv: Vec2) -> Rgb {
+        let x = ((uv.x * self.width as f32) as usize).min(self.width - 1);
+        let y = ((uv.y * self.height as f32) as usize).min(self.height - 1);
+        self.pixels[y * self.width + x]
+    }
+}
+
+impl Environment {
+    /// Image coordinates of a direction in the environment's frame.
+    fn uv(d: Vec3) -> Vec2 {
+        let u = (d.x.atan2(-d.z) / (2.0 * PI)).rem_euclid(1.0);
+        let v = d.y.clamp(-1.0, 1.0).acos() / PI;
+        Vec2::new(u, v)
+    }
+
+    fn direction(uv: Vec2) -> Vec3 {
+        let phi = uv.x * 2.0 * PI;
+        let theta = uv.y * PI;
+        Vec3::new(theta.sin() * phi.sin(), theta.cos(), -theta.sin() * phi.cos())
+    }
+
+    /// Radiance arriving from world direction `-d`, i.e. seen looking along `d`.
+    pub fn eval(&self, d: Vec3) -> Rgb {
+        match &self.map {
+            None => self.scale,
+            Some(m) => self.scale * m.lookup(Self::uv(self.to_world.transpose() * d.normalize())),
+        }
+    }
+
+    /// Solid-angle density of sampling world direction `d`.
+    pub fn pdf(&self, d: Vec3) -> f32 {
+        match self.map.as_ref().and_then(|m| m.distribution.as_ref()) {
+            None => 1.0 / (4.0 * PI),
+            Some(dist) => {
+                let uv = Self::uv(self.to_world.transpose() * d.normalize());
+                let sin = (uv.y * PI).sin();
+                if sin <= 0.0 {
+                    return 0.0;
+                }
+                dist.pdf(uv) / (2.0 * PI * PI * sin)
+            }
+        }
+    }
+
+    fn sample(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
+        let (wi, pdf) = match self.map.as_ref().and_then(|m| m.distribution.as_ref()) {
+            None => {
+                let z = 1.0 - 2.0 * u.x;
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                let phi = 2.0 * PI * u.y;
+                (Vec3::new(r * phi.cos(), r * phi.sin(), z), 1.0 / (4.0 * PI))
+            }
+            Some(dist) => {
+                let (uv, pdf_uv) = dist.sample(u);
+                let sin = (uv.y * PI).sin();
+                if pdf_uv <= 0.0 || sin <= 0.0 {
+                    return None;
+                }
+                // The pdf as `pdf` computes it from the direction, so that MIS weights agree
+                // exactly (rounding can move a direction on a cell border to its neighbour).
+                let wi = self.to_world * Self::direction(uv);
+                (wi, self.pdf(wi))
+            }
+        };
+        if pdf <= 0.0 {
+            return None;
+        }
+        let value = self.eval(wi) / pdf;
+        Some(LightSample { wi, p: p + wi, n: Vec3::ZERO, infinite: true, value, pdf })
+    }
 }
 
 /// An emissive surface: uniform, one-sided radiance `emission` on the side of its normals.
@@ -117,6 +233,7 @@ impl Light {
                 pdf: 0.0,
             }),
             Light::Area(a) => a.sample(p, u),
+            Light::Environment(e) => e.sample(p, u),
         }
     }
 }
@@ -125,6 +242,9 @@ impl Light {
     /// The solid-angle density with which [`Light::sample`] at `p` picks the direction
     /// towards `q`, a point on this light with unit normal `nq` (0 for delta lights).
     pub fn pdf(&self, p: Vec3, q: Vec3, nq: Vec3) -> f32 {
+        if let Light::Environment(e) = self {
+            return e.pdf(q - p);
+        }
         let Light::Area(a) = self else { return 0.0 };
         match &a.shape {
             AreaShape::Sphere(s) => {
@@ -160,6 +280,10 @@ impl Light {
             }
             Light::Directional { irradiance, .. } => PI * scene_radius * scene_radius * mean(irradiance),
             Light::Area(a) => PI * a.area() * mean(&a.emission),
+            Light::Environment(e) => {
+                let m = e.map.as_ref().map_or(Rgb::ONE, |m| m.pixels.iter().sum::<Rgb>() / m.pixels.len() as f32);
+                PI * scene_radius * scene_radius * mean(&(e.scale * m))
+            }
         }
     }
 }
@@ -298,6 +422,83 @@ mod tests {
             shape: AreaShape::Triangles { tris, cdf },
         });
         assert_eq!(irradiance(&l, 100), 0.0);
+    }
+
+    fn env(map: Option<EnvMap>) -> Environment {
+        Environment { scale: Rgb::ONE, map, to_world: glam::Mat3::from_rotation_y(0.7) }
+    }
+
+    /// A small image with a bright spot, a dark band and a colour gradient.
+    fn test_map() -> EnvMap {
+        let (w, h) = (16, 8);
+        let pixels = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let base = Rgb::new(0.2 + x as f32 / w as f32, 0.3, 0.1 + y as f32 / h as f32);
+                if (x, y) == (5, 2) {
+                    base * 200.0
+                } else if y == 6 {
+                    Rgb::ZERO
+                } else {
+                    base
+                }
+            })
+            .collect();
+        EnvMap::new(w, h, pixels).unwrap()
+    }
+
+    #[test]
+    fn environment_pdf_integrates_to_one_and_matches_sampling() {
+        for e in [env(None), env(Some(test_map()))] {
+            // ∫ pdf dω = 1 by quadrature.
+            let (nt, np) = (400, 800);
+            let mut sum = 0.0f64;
+            for i in 0..nt {
+                for j in 0..np {
+                    let th = (i as f32 + 0.5) / nt as f32 * PI;
+                    let ph = (j as f32 + 0.5) / np as f32 * 2.0 * PI;
+                    let d = Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin());
+                    sum += (e.pdf(d) * th.sin() * (PI / nt as f32) * (2.0 * PI / np as f32)) as f64;
+                }
+            }
+            assert!((sum - 1.0).abs() < 2e-3, "∫ pdf = {sum}");
+            // Each sample's pdf is the pdf of its direction, and value = L / pdf; the estimate of
+            // ∫ L dω from samples matches the quadrature.
+            let mut rng = Pcg32::new(8, 8);
+            let n = 100_000;
+            let mut est = Rgb::ZERO;
+            for _ in 0..n {
+                // `None` only where a direction rounds into a black cell (measure zero).
+                let Some(s) = e.sample(Vec3::ZERO, rng.next_2d()) else { continue };
+                assert!((s.pdf - e.pdf(s.wi)).abs() <= 1e-3 * s.pdf, "{} vs {}", s.pdf, e.pdf(s.wi));
+                assert!(s.infinite && (s.wi.length() - 1.0).abs() < 1e-5);
+                est += s.value / n as f32;
+            }
+            let mut exact = Rgb::ZERO;
+            for i in 0..nt {
+                for j in 0..np {
+                    let th = (i as f32 + 0.5) / nt as f32 * PI;
+                    let ph = (j as f32 + 0.5) / np as f32 * 2.0 * PI;
+                    let d = Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin());
+                    exact += e.eval(d) * (th.sin() * (PI / nt as f32) * (2.0 * PI / np as f32));
+                }
+            }
+            assert!((est - exact).abs().max_element() < 0.01 * exact.max_element(), "{est} vs {exact}");
+        }
+    }
+
+    #[test]
+    fn environment_image_orientation() {
+        // Mitsuba's convention: the top row is +y, u = atan2(x, -z) / 2π (so -z is the left edge
+        // and the middle column is +z).
+        let mut pixels = vec![Rgb::ZERO; 8 * 4];
+        pixels[0] = Rgb::new(1.0, 0.0, 0.0); // top left
+        pixels[3 * 8 + 4] = Rgb::new(0.0, 1.0, 0.0); // bottom row, middle
+        let e = Environment { scale: Rgb::ONE, map: EnvMap::new(8, 4, pixels), to_world: glam::Mat3::IDENTITY };
+        let up_and_towards_minus_z = Vec3::new(0.01, 0.9, -0.3).normalize();
+        assert_eq!(e.eval(up_and_towards_minus_z), Rgb::new(1.0, 0.0, 0.0));
+        let down_and_towards_plus_z = Vec3::new(-0.01, -0.9, 0.3).normalize();
+        assert_eq!(e.eval(down_and_towards_plus_z), Rgb::new(0.0, 1.0, 0.0));
     }
 
     #[test]

@@ -165,9 +165,77 @@ pub fn build_cdf(weights: impl IntoIterator<Item = f32>) -> Vec<f32> {
         .collect()
 }
 
+/// A piecewise-constant 2D distribution over `[0, 1)²` on a `width × height` grid of
+/// non-negative weights (pbrt's `PiecewiseConstant2D`): a marginal over rows, a conditional
+/// per row.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Distribution2D {
+    width: usize,
+    height: usize,
+    /// Per row, the running sums of its weights.
+    rows: Vec<Vec<f32>>,
+    /// Running sums of the rows' totals.
+    marginal: Vec<f32>,
+}
+
+impl Distribution2D {
+    /// `weights` row by row (`weights[y * width + x]`). `None` if everything is zero.
+    pub fn new(width: usize, height: usize, weights: &[f32]) -> Option<Distribution2D> {
+        if width == 0 || height == 0 || weights.len() != width * height {
+            return None;
+        }
+        let rows: Vec<Vec<f32>> = weights.chunks(width).map(|r| build_cdf(r.iter().copied())).collect();
+        let marginal = build_cdf(rows.iter().map(|r| *r.last().unwrap_or(&0.0)));
+        (*marginal.last()? > 0.0).then_some(Distribution2D { width, height, rows, marginal })
+    }
+
+    /// A point in `[0, 1)²` and its density (with respect to area in `[0, 1)²`).
+    pub fn sample(&self, u: Vec2) -> (Vec2, f32) {
+        let (y, fy) = sample_cdf(&self.marginal, u.y);
+        let (x, fx) = sample_cdf(&self.rows[y], u.x);
+        let p = Vec2::new((x as f32 + fx) / self.width as f32, (y as f32 + fy) / self.height as f32);
+        (p, self.pdf(p))
+    }
+
+    /// The density at `p ∈ [0, 1)²`.
+    pub fn pdf(&self, p: Vec2) -> f32 {
+        let x = ((p.x * self.width as f32) as usize).min(self.width - 1);
+        let y = ((p.y * self.height as f32) as usize).min(self.height - 1);
+        let row = &self.rows[y];
+        let w = row[x] - if x == 0 { 0.0 } else { row[x - 1] };
+        let total = *self.marginal.last().unwrap_or(&1.0);
+        w / total * (self.width * self.height) as f32
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn distribution_2d_samples_match_its_pdf() {
+        let w = [0.0, 1.0, 2.0, 3.0, 0.5, 0.0];
+        let d = Distribution2D::new(3, 2, &w).unwrap();
+        let mut counts = [0usize; 6];
+        let mut rng = Pcg32::new(4, 4);
+        let n = 120_000;
+        for _ in 0..n {
+            let (p, pdf) = d.sample(rng.next_2d());
+            let (x, y) = ((p.x * 3.0) as usize, (p.y * 2.0) as usize);
+            assert!(pdf > 0.0 && (pdf - d.pdf(p)).abs() < 1e-5);
+            counts[y * 3 + x] += 1;
+        }
+        let total: f32 = w.iter().sum();
+        for i in 0..6 {
+            let expect = w[i] / total;
+            let got = counts[i] as f32 / n as f32;
+            assert!((got - expect).abs() < 0.01, "cell {i}: {got} vs {expect}");
+            // The pdf integrates to the cell's share: pdf · cell area.
+            let centre = Vec2::new((i % 3) as f32 / 3.0 + 0.1, (i / 3) as f32 / 2.0 + 0.1);
+            assert!((d.pdf(centre) / 6.0 - expect).abs() < 1e-6);
+        }
+        assert!(Distribution2D::new(2, 1, &[0.0, 0.0]).is_none());
+    }
 
     #[test]
     fn permute_is_a_permutation() {

@@ -334,6 +334,8 @@ pub struct World<'s, A: Accel> {
     light_cdf: Vec<f32>,
     /// Per object, the index of its area light in `lights` (`u32::MAX`: not emissive).
     object_light: Vec<u32>,
+    /// The index of the environment light in `lights`, if there is one.
+    environment: Option<usize>,
 }
 
 impl<'s, A: Accel> World<'s, A> {
@@ -390,7 +392,22 @@ impl<'s, A: Accel> World<'s, A> {
                 0.0
             }
         }));
-        World { scene, top, blas, tris, lights, light_cdf, object_light }
+        let environment = lights.iter().position(|l| matches!(l, Light::Environment(_)));
+        World { scene, top, blas, tris, lights, light_cdf, object_light, environment }
+    }
+
+    /// The environment light and its index in `lights`, if the scene has one.
+    pub fn environment(&self) -> Option<(usize, &crate::light::Environment)> {
+        let i = self.environment?;
+        match &self.lights[i] {
+            Light::Environment(e) => Some((i, e)),
+            _ => None,
+        }
+    }
+
+    /// Radiance of a ray that leaves the scene along `d`: the background plus the environment.
+    pub fn escaped(&self, d: Vec3) -> Rgb {
+        self.scene.background + self.environment().map_or(Rgb::ZERO, |(_, e)| e.eval(d))
     }
 
     /// Chooses a light in proportion to its power: its index and the probability of the choice.

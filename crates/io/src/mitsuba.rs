@@ -8,7 +8,7 @@
 //! `flip_normals`; BSDFs `diffuse`, `dielectric`, `thindielectric`, `roughdielectric`,
 //! `conductor`, `roughconductor`, `plastic`, `roughplastic`, `twosided`; the `checkerboard`
 //! texture; named indices of refraction and metals; `rgb` and `spectrum` values; emitters
-//! `area`, `point`, `spot`, `directional`, `constant`; the `perspective` and `thinlens` sensors,
+//! `area`, `point`, `spot`, `directional`, `constant`, `envmap`; the `perspective` and `thinlens` sensors,
 //! `hdrfilm` and its `rfilter`, the sampler's `sample_count` and `seed`; integrators `path` and
 //! `direct`. Units and defaults are Mitsuba's.
 //!
@@ -27,7 +27,7 @@ use snell_core::camera::{Camera, Projection};
 use snell_core::filter::Filter;
 use snell_core::geometry::Transform;
 use snell_core::integrator::IntegratorKind;
-use snell_core::light::Light;
+use snell_core::light::{EnvMap, Environment, Light};
 use snell_core::material::microfacet::Distribution;
 use snell_core::material::{self, Material, Texture};
 use snell_core::render::Reconstruction;
@@ -841,9 +841,28 @@ impl Ctx {
                 let irradiance = self.color(e, "irradiance", Rgb::ONE)?;
                 self.lights.push(Light::Directional { direction: d.normalize(), irradiance });
             }
-            "constant" => {
-                let radiance = self.color(e, "radiance", Rgb::ONE)?;
-                self.background += radiance;
+            "constant" | "envmap" => {
+                if self.lights.iter().any(|l| matches!(l, Light::Environment(_))) {
+                    self.warn(e, "a second environment emitter is ignored");
+                    return Ok(());
+                }
+                let rot = to_world.unwrap_or(Affine3A::IDENTITY).matrix3;
+                let to_world = Mat3::from_cols(
+                    Vec3::from(rot.x_axis).normalize_or_zero(),
+                    Vec3::from(rot.y_axis).normalize_or_zero(),
+                    Vec3::from(rot.z_axis).normalize_or_zero(),
+                );
+                let (scale, map) = if kind == "constant" {
+                    (self.color(e, "radiance", Rgb::ONE)?, None)
+                } else {
+                    let f = self.string(e, "filename").ok_or_else(|| self.files.err(e, "envmap needs 'filename'"))?;
+                    let path = self.resolve(e, f)?;
+                    let img = crate::image_in::read_rgb(&path)?;
+                    let map = EnvMap::new(img.width, img.height, img.pixels)
+                        .ok_or_else(|| self.files.err(e, "the environment image has negative or non-finite values"))?;
+                    (Rgb::splat(self.float(e, "scale", 1.0)?), Some(map))
+                };
+                self.lights.push(Light::Environment(Environment { scale, map, to_world }));
             }
             "area" => {
                 if e.attr("id").is_none() {

@@ -16,7 +16,7 @@ use snell_core::camera::{Camera, Projection};
 use snell_core::filter::Filter;
 use snell_core::geometry::{Aabb, Transform};
 use snell_core::integrator::{AnyIntegrator, IntegratorKind, Path as PathTracer, Whitted};
-use snell_core::light::Light;
+use snell_core::light::{EnvMap, Environment, Light};
 use snell_core::material::microfacet::Distribution;
 use snell_core::material::{self, Material};
 use snell_core::render::Reconstruction;
@@ -292,6 +292,9 @@ struct LightDef {
     cone_angle: S<Num>,
     falloff_start: S<Num>,
     irradiance: S<Color>,
+    radiance: S<Color>,
+    file: S<String>,
+    rotate_y: S<Num>,
 }
 
 #[derive(Deserialize)]
@@ -689,6 +692,11 @@ fn light_def(cx: &Ctx, def: &Spanned<LightDef>) -> Result<Light, Error> {
         val(v).map(|v| v.0).ok_or_else(|| cx.err(def.span(), format!("{what} needs '{key}'")))
     };
     let color = |f: &S<Color>| val(f).map_or(Rgb::ONE, |c| c.0);
+    if kind != "environment" {
+        cx.reject(&l.radiance, "radiance", &what)?;
+        cx.reject(&l.file, "file", &what)?;
+        cx.reject(&l.rotate_y, "rotate_y", &what)?;
+    }
     match kind {
         "point" => {
             for (f, k) in [(&l.direction, "direction"), (&l.look_at, "look_at")] {
@@ -707,7 +715,8 @@ fn light_def(cx: &Ctx, def: &Spanned<LightDef>) -> Result<Light, Error> {
                 (None, Some(t)) => t.0 - position,
                 _ => return Err(cx.err(def.span(), "a spot light needs exactly one of 'direction' and 'look_at'")),
             };
-            let direction = direction.try_normalize().ok_or_else(|| cx.err(def.span(), "the spot light's direction is zero"))?;
+            let direction =
+                direction.try_normalize().ok_or_else(|| cx.err(def.span(), "the spot light's direction is zero"))?;
             let cone = cx.num(&l.cone_angle, 0.0, 180.0, "cone_angle", 30.0)?;
             let start = cx.num(&l.falloff_start, 0.0, cone, "falloff_start", (cone - 5.0).max(0.0))?;
             Ok(Light::Spot {
@@ -729,9 +738,38 @@ fn light_def(cx: &Ctx, def: &Spanned<LightDef>) -> Result<Light, Error> {
                 .ok_or_else(|| cx.err(def.span(), "the light's direction is zero"))?;
             Ok(Light::Directional { direction, irradiance: color(&l.irradiance) })
         }
+        "environment" => {
+            for (f, k) in [(&l.position, "position"), (&l.direction, "direction"), (&l.look_at, "look_at")] {
+                cx.reject(f, k, &what)?;
+            }
+            cx.reject(&l.intensity, "intensity", &what)?;
+            cx.reject(&l.irradiance, "irradiance", &what)?;
+            cx.reject(&l.cone_angle, "cone_angle", &what)?;
+            cx.reject(&l.falloff_start, "falloff_start", &what)?;
+            let map =
+                match &l.file {
+                    None => None,
+                    Some(f) => {
+                        let p = cx.path.parent().unwrap_or(Path::new(".")).join(f.get_ref());
+                        let img = crate::image_in::read_rgb(&p)?;
+                        Some(EnvMap::new(img.width, img.height, img.pixels).ok_or_else(|| {
+                            cx.err(f.span(), "the environment image has negative or non-finite values")
+                        })?)
+                    }
+                };
+            let angle = cx.num(&l.rotate_y, -360.0, 360.0, "rotate_y", 0.0)?;
+            Ok(Light::Environment(Environment {
+                scale: val(&l.radiance).map_or(Rgb::ONE, |c| c.0),
+                map,
+                to_world: glam::Mat3::from_rotation_y(angle.to_radians()),
+            }))
+        }
         _ => Err(cx.err(
             l.kind.span(),
-            format!("unknown light type '{kind}' (expected point, spot or directional; area lights are shapes with 'emission')"),
+            format!(
+                "unknown light type '{kind}' (expected point, spot, directional or environment; area lights are shapes \
+                 with 'emission')"
+            ),
         )),
     }
 }

@@ -405,9 +405,11 @@ fn path_tracer_furnaces() {
         ("type = \"dielectric\"\nior = 1.5", 1.0, 1e-4),
         ("type = \"thindielectric\"\nior = 1.5", 1.0, 1e-4),
     ];
-    for (material, expect, tol) in cases {
+    // The environment as an unsampled background, and as a light sampled with MIS.
+    let envs = ["[render]\nbackground = 1\n", "[[lights]]\ntype = \"environment\"\nradiance = 1\n[render]\n"];
+    for ((material, expect, tol), env) in cases.iter().flat_map(|c| envs.iter().map(move |e| (*c, *e))) {
         let src = format!(
-            "[render]\nbackground = 1\nintegrator = \"path\"\nrr_depth = 1000\nmax_depth = 200\n[camera]\neye = [0, 0, 4]\nfov = 20\n\
+            "{env}integrator = \"path\"\nrr_depth = 1000\nmax_depth = 200\n[camera]\neye = [0, 0, 4]\nfov = 20\n\
              [materials.m]\n{material}\n[[shapes]]\ntype = \"sphere\"\nradius = 1\nmaterial = \"m\"\n"
         );
         let (img, stats) = render_src(&src, &Opts { width: 16, height: 16, spp: 64, ..Opts::default() });
@@ -421,7 +423,9 @@ fn path_tracer_furnaces() {
             }
         }
         let m = (sum / n as f64) as f32;
-        assert!((m - expect).abs() <= tol.max(1e-4) * expect, "{material}: mean {m}, expected {expect}");
+        // Light sampling makes single paths vary even in a furnace: then only the mean is exact.
+        let tol = if env.contains("environment") { tol.max(0.01) } else { tol.max(1e-4) };
+        assert!((m - expect).abs() <= tol * expect, "{material} ({env:?}): mean {m}, expected {expect}");
         assert!(stats.reflection + stats.refraction > 0);
     }
 }

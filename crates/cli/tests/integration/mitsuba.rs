@@ -163,8 +163,11 @@ fn emitters_and_instances() {
            <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="4"/></emitter></shape>"#,
     )
     .unwrap();
-    assert_eq!(l.scene.lights.len(), 2);
-    assert_eq!(l.scene.background, Vec3::splat(0.25));
+    assert_eq!(l.scene.lights.len(), 3);
+    match &l.scene.lights[1] {
+        snell_core::light::Light::Environment(e) => assert!(e.map.is_none() && e.scale == Vec3::splat(0.25)),
+        other => panic!("{other:?}"),
+    }
     let o = &l.scene.objects;
     assert_eq!(o.len(), 3);
     assert_eq!(o[0].geometry, o[1].geometry, "instances share the group's mesh");
@@ -204,7 +207,7 @@ fn bad_files_name_file_line_and_column() {
     let (_d, e) = load_files(&[("m.xml", "<scene version=\"3.0.0\">\n<shape></bsdf>\n</scene>")], &[]);
     assert!(e.as_ref().unwrap_err().contains("m.xml:2:"), "{e:?}");
     // Unsupported elements are warnings with a position, and loading goes on.
-    let l = load_xml(r#"<shape type="hair"/><emitter type="envmap"/>"#).unwrap();
+    let l = load_xml(r#"<shape type="hair"/><emitter type="projector"/>"#).unwrap();
     assert_eq!(l.warnings.len(), 2, "{:?}", l.warnings);
     assert!(l.warnings[0].contains("scene.xml:7:") && l.warnings[0].contains("hair"), "{:?}", l.warnings);
 }

@@ -140,3 +140,36 @@ fn the_bunnies_example_scene_loads() {
     assert_eq!(l.scene.objects.len(), 1001);
     assert_eq!(l.scene.geometries.len(), 2);
 }
+
+#[test]
+fn hdr_and_exr_environment_maps_light_the_path_tracer() {
+    for rel in ["envmaps/spiaggia_di_mondello_1k.hdr", "envmaps/museum.exr"] {
+        let Some(p) = shared_scene(rel) else { return };
+        let src = format!(
+            "[render]\nintegrator = \"path\"\n[camera]\neye = [0, 0, 4]\nfov = 30\n\
+             [[lights]]\ntype = \"environment\"\nfile = {:?}\nrotate_y = 45\n\
+             [[shapes]]\ntype = \"sphere\"\nradius = 1\n",
+            p.to_str().unwrap()
+        );
+        let l = snell_io::scene::parse(&src, std::path::Path::new("/env.toml")).unwrap_or_else(|e| panic!("{e}"));
+        match &l.scene.lights[0] {
+            snell_core::light::Light::Environment(e) => {
+                let m = e.map.as_ref().unwrap();
+                assert_eq!(m.width, 2 * m.height, "{rel}: equirectangular");
+            }
+            other => panic!("{other:?}"),
+        }
+        let (img, _) = crate::images::render_loaded(
+            &l,
+            &crate::images::Opts { width: 16, height: 16, spp: 4, ..Default::default() },
+        );
+        assert!(img.pixels.iter().all(|p| p.is_finite() && p.max_element() > 0.0), "{rel}");
+    }
+    let e = snell_io::scene::parse(
+        "[[lights]]\ntype = \"environment\"\nfile = \"nowhere.hdr\"\n",
+        std::path::Path::new("/tmp/x.toml"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("nowhere.hdr") && e.contains("no such file"), "{e}");
+}

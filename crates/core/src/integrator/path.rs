@@ -64,6 +64,14 @@ impl Integrator for Path {
         loop {
             let Some(hit) = world.intersect(&ray, f32::INFINITY) else {
                 l += beta * scene.background;
+                if let Some((li, env)) = world.environment() {
+                    let w = if prev_delta {
+                        1.0
+                    } else {
+                        power_heuristic(prev_pdf, world.light_probability(li) * env.pdf(ray.d))
+                    };
+                    l += beta * env.eval(ray.d) * w;
+                }
                 break;
             };
             let obj = &scene.objects[hit.object as usize];

@@ -63,7 +63,7 @@ impl Integrator for Whitted {
 impl Whitted {
     fn trace<A: Accel>(&self, cx: &mut Ctx<A>, ray: &Ray, depth: u32, throughput: Rgb) -> Rgb {
         let Some(hit) = cx.world.intersect(ray, f32::INFINITY) else {
-            return cx.world.scene.background;
+            return cx.world.escaped(ray.d);
         };
         let scene = cx.world.scene;
         let obj = &scene.objects[hit.object as usize];
@@ -193,6 +193,9 @@ impl Whitted {
         let n_bsdf = if m.bsdf(hit.uv).transmits() { hit.ns } else { ns };
         let mut sum = Rgb::ZERO;
         for (li, light) in cx.world.lights.iter().enumerate() {
+            if matches!(light, crate::light::Light::Environment(_)) {
+                continue; // Whitted sees the environment only along its rays (and the ambient term).
+            }
             let n = light.samples();
             let mut acc = Rgb::ZERO;
             for s in 0..n {
