@@ -2,6 +2,7 @@
 //! mesh that cannot be read, an output that cannot be written), 2 for command-line misuse.
 
 mod bench;
+mod diff;
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -34,6 +35,9 @@ enum Command {
     /// Measure acceleration structure build time and ray throughput on a mesh (the workload of
     /// the Embree reference benchmark).
     Bench(bench::BenchArgs),
+    /// Compare an image with a reference: mean colours, RMSE, relative MSE, and optionally a
+    /// false-colour error image.
+    Diff(diff::DiffArgs),
 }
 
 #[derive(clap::Args)]
@@ -117,6 +121,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(args) => cmd_render(args),
         Command::Bench(args) => bench::run(args),
+        Command::Diff(args) => diff::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,6 +4,7 @@ mod accel;
 mod bad_input;
 mod bench;
 mod common;
+mod diff;
 mod images;
 mod mitsuba;
 mod shared_scenes;
