@@ -74,6 +74,10 @@ struct RenderArgs {
     /// Path: longest path in segments (1: emitters only, 2: direct light; default unbounded).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100_000))]
     max_depth: Option<u32>,
+    /// Sample generator: independent (random, with stratified camera samples) or sobol
+    /// (Owen-scrambled Sobol points in every dimension).
+    #[arg(long, value_parser = parse_sampler)]
+    sampler: Option<snell_core::sampling::SamplerKind>,
     /// Path: depth at which Russian roulette starts.
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100_000))]
     rr_depth: Option<u32>,
@@ -106,6 +110,10 @@ fn parse_accel(s: &str) -> Result<AccelKind, String> {
 }
 
 fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
+    s.parse()
+}
+
+fn parse_sampler(s: &str) -> Result<snell_core::sampling::SamplerKind, String> {
     s.parse()
 }
 
@@ -167,6 +175,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         threads: args.threads.unwrap_or(0) as usize,
         filter: s.filter.clone(),
         reconstruction: s.reconstruction,
+        sampler: args.sampler.unwrap_or(s.sampler),
     };
     settings.check().map_err(anyhow::Error::msg)?;
     let integrator = snell_io::scene::SceneSettings {

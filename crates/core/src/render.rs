@@ -9,7 +9,7 @@ use crate::accel::Accel;
 use crate::filter::Filter;
 use crate::image::Image;
 use crate::integrator::{Integrator, RayStats};
-use crate::sampling::{stratified_2d, Pcg32};
+use crate::sampling::{stratified_2d, Sampler, SamplerKind};
 use crate::scene::World;
 use crate::Rgb;
 
@@ -25,6 +25,7 @@ pub struct RenderSettings {
     pub threads: usize,
     pub filter: Filter,
     pub reconstruction: Reconstruction,
+    pub sampler: SamplerKind,
 }
 
 /// How samples become pixels.
@@ -50,6 +51,7 @@ impl Default for RenderSettings {
             threads: 0,
             filter: Filter::default(),
             reconstruction: Reconstruction::default(),
+            sampler: SamplerKind::default(),
         }
     }
 }
@@ -185,9 +187,15 @@ fn render_pixel<A: Accel, I: Integrator>(
     let pixel = y as u64 * s.width as u64 + x as u64;
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
     for i in 0..s.spp {
-        let mut rng = Pcg32::for_sample(s.seed, pixel, i as u64);
-        let film_u = stratified_2d(i, s.spp, key, &mut rng);
-        let lens_u = stratified_2d(i, s.spp, key ^ 0x5bd1_e995, &mut rng);
+        let mut sampler = Sampler::new(s.sampler, s.seed, pixel, i, s.spp);
+        let (film_u, lens_u) = match s.sampler {
+            SamplerKind::Independent => {
+                let rng = sampler.rng();
+                let film = stratified_2d(i, s.spp, key, rng);
+                (film, stratified_2d(i, s.spp, key ^ 0x5bd1_e995, rng))
+            }
+            SamplerKind::Sobol => (sampler.next_2d(), sampler.next_2d()),
+        };
         let offset = match s.reconstruction {
             Reconstruction::ImportanceSampled => s.filter.sample(film_u),
             Reconstruction::Splat => film_u - Vec2::splat(0.5),
@@ -195,7 +203,7 @@ fn render_pixel<A: Accel, I: Integrator>(
         let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
         let ray = world.scene.camera.ray(film, s.width, s.height, lens_u);
         stats.camera += 1;
-        let l = integrator.radiance(world, &ray, &mut rng, stats);
+        let l = integrator.radiance(world, &ray, &mut sampler, stats);
         // A non-finite sample (NaN from a degenerate configuration) would poison the pixel;
         // it still counts (as black), so that the estimate stays unbiased where it is finite.
         sink(film, if l.is_finite() { l } else { Rgb::ZERO });

@@ -31,6 +31,7 @@ use snell_core::light::{EnvMap, Environment, Light};
 use snell_core::material::microfacet::Distribution;
 use snell_core::material::{self, Material, Texture};
 use snell_core::render::Reconstruction;
+use snell_core::sampling::SamplerKind;
 use snell_core::scene::{Geometry, LightSelection, Object, Scene};
 use snell_core::shape::{Mesh, Sphere};
 use snell_core::Rgb;
@@ -1005,8 +1006,12 @@ pub fn load(path: &Path, defines: &[(String, String)]) -> Result<LoadedScene, Er
                     }
                 }
                 if let Some(s) = n.children.iter().find(|c| c.tag == "sampler") {
-                    if s.attr("type").unwrap_or("independent") != "independent" {
-                        cx.warn(s, "only the sample count and seed of this sampler are used");
+                    match s.attr("type").unwrap_or("independent") {
+                        "independent" => settings.sampler = SamplerKind::Independent,
+                        t => {
+                            settings.sampler = SamplerKind::Sobol;
+                            cx.warn(s, format!("sampler '{t}' is rendered with Owen-scrambled Sobol points"));
+                        }
                     }
                     settings.spp = cx.int(s, "sample_count", 4)?.clamp(1, 1 << 20) as u32;
                     settings.seed = cx.int(s, "seed", 0)?.max(0) as u64;

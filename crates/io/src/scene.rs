@@ -20,6 +20,7 @@ use snell_core::light::{EnvMap, Environment, Light};
 use snell_core::material::microfacet::Distribution;
 use snell_core::material::{self, Material};
 use snell_core::render::Reconstruction;
+use snell_core::sampling::SamplerKind;
 use snell_core::scene::{Geometry, LightSelection, Object, Scene};
 use snell_core::shape::{Mesh, Sphere};
 use snell_core::Rgb;
@@ -44,6 +45,7 @@ pub struct SceneSettings {
     pub accel: AccelKind,
     pub filter: Filter,
     pub reconstruction: Reconstruction,
+    pub sampler: SamplerKind,
 }
 
 impl Default for SceneSettings {
@@ -60,6 +62,7 @@ impl Default for SceneSettings {
             accel: AccelKind::DEFAULT,
             filter: Filter::default(),
             reconstruction: Reconstruction::default(),
+            sampler: SamplerKind::default(),
         }
     }
 }
@@ -246,6 +249,7 @@ struct RenderDef {
     ambient: Option<Color>,
     light_selection: S<String>,
     reconstruction: S<String>,
+    sampler: S<String>,
 }
 
 #[derive(Deserialize)]
@@ -510,6 +514,9 @@ fn render_settings(cx: &Ctx, r: Option<&RenderDef>) -> Result<SceneSettings, Err
     s.rr_depth = cx.int(&r.rr_depth, 0, 100_000, "rr_depth", s.rr_depth as i64)? as u32;
     if let Some(a) = &r.accel {
         s.accel = a.get_ref().parse().map_err(|e: String| cx.err(a.span(), e))?;
+    }
+    if let Some(sm) = &r.sampler {
+        s.sampler = sm.get_ref().parse().map_err(|e: String| cx.err(sm.span(), e))?;
     }
     if let Some(rc) = &r.reconstruction {
         s.reconstruction = match rc.get_ref().as_str() {

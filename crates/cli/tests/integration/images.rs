@@ -40,6 +40,7 @@ pub fn render_loaded(l: &LoadedScene, o: &Opts) -> (Image, RayStats) {
         threads: o.threads,
         filter: l.settings.filter.clone(),
         reconstruction: l.settings.reconstruction,
+        sampler: l.settings.sampler,
     };
     let integrator = snell_io::scene::SceneSettings {
         max_depth: o.max_depth.or(l.settings.max_depth),

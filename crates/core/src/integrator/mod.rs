@@ -8,7 +8,7 @@ pub use whitted::Whitted;
 
 use crate::accel::Accel;
 use crate::geometry::Ray;
-use crate::sampling::Pcg32;
+use crate::sampling::Sampler;
 use crate::scene::World;
 use crate::Rgb;
 
@@ -44,7 +44,7 @@ impl RayStats {
 
 /// Computes the radiance arriving along a camera ray.
 pub trait Integrator: Sync {
-    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb;
+    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, sampler: &mut Sampler, stats: &mut RayStats) -> Rgb;
 }
 
 /// The integrator a render uses, chosen once per render (enum dispatch, no virtual calls).
@@ -55,10 +55,10 @@ pub enum AnyIntegrator {
 }
 
 impl Integrator for AnyIntegrator {
-    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb {
+    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, sampler: &mut Sampler, stats: &mut RayStats) -> Rgb {
         match self {
-            AnyIntegrator::Whitted(w) => w.radiance(world, ray, rng, stats),
-            AnyIntegrator::Path(p) => p.radiance(world, ray, rng, stats),
+            AnyIntegrator::Whitted(w) => w.radiance(world, ray, sampler, stats),
+            AnyIntegrator::Path(p) => p.radiance(world, ray, sampler, stats),
         }
     }
 }

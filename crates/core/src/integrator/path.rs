@@ -17,7 +17,7 @@ use super::{Integrator, RayStats};
 use crate::accel::Accel;
 use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
 use crate::material::Frame;
-use crate::sampling::Pcg32;
+use crate::sampling::Sampler;
 use crate::scene::World;
 use crate::Rgb;
 
@@ -50,7 +50,7 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
 }
 
 impl Integrator for Path {
-    fn radiance<A: Accel>(&self, world: &World<A>, camera_ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb {
+    fn radiance<A: Accel>(&self, world: &World<A>, camera_ray: &Ray, rng: &mut Sampler, stats: &mut RayStats) -> Rgb {
         let scene = world.scene;
         let mut l = Rgb::ZERO;
         let mut beta = Rgb::ONE;

@@ -22,7 +22,7 @@ use super::{Integrator, RayStats};
 use crate::accel::Accel;
 use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
 use crate::material::{conductor_fresnel, fresnel, Material};
-use crate::sampling::{stratified_2d, Pcg32};
+use crate::sampling::{stratified_2d, Pcg32, Sampler};
 use crate::scene::{Intersection, World};
 use crate::Rgb;
 
@@ -54,8 +54,9 @@ struct Ctx<'a, 'w, A: Accel> {
 }
 
 impl Integrator for Whitted {
-    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, rng: &mut Pcg32, stats: &mut RayStats) -> Rgb {
-        let mut ctx = Ctx { world, rng, stats };
+    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, sampler: &mut Sampler, stats: &mut RayStats) -> Rgb {
+        // The ray tree stratifies its shadow rays itself, from the independent stream.
+        let mut ctx = Ctx { world, rng: sampler.rng(), stats };
         self.trace(&mut ctx, ray, 0, Rgb::ONE)
     }
 }
