@@ -14,7 +14,7 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use snell_core::accel::{AccelKind, AccelParams};
 use snell_core::integrator::{IntegratorKind, RayStats};
-use snell_core::render::{render, RenderSettings};
+use snell_core::render::{render_with_aovs, RenderSettings};
 use snell_core::with_world;
 use snell_io::scene::LoadedScene;
 
@@ -87,10 +87,12 @@ struct RenderArgs {
     /// Acceleration structure: default, brute, bvh-center, bvh-median, bvh-sah, bvh-bottomup, kdtree, grid.
     #[arg(long, value_parser = parse_accel)]
     accel: Option<AccelKind>,
-    /// Instead of shading, `heatmap`: one ray per pixel centre, coloured by the nodes it visits
-    /// (written to OUT) and the primitives it tests (written to OUT with `-prims` added).
-    #[arg(long, value_parser = ["heatmap"])]
-    aov: Option<String>,
+    /// Extra images. `albedo`, `normal`, `depth` (comma-separated): written as further channels
+    /// of the EXR (`albedo.R/G/B`, `normal.X/Y/Z`, `Z`). Or, instead of shading, `heatmap`: one
+    /// ray per pixel centre, coloured by the nodes it visits (written to OUT) and the primitives
+    /// it tests (written to OUT with `-prims` added).
+    #[arg(long, value_parser = parse_aov)]
+    aov: Option<Aov>,
     /// Draw the boxes of the acceleration structure at this depth (0 = the root) over the image.
     #[arg(long, value_name = "DEPTH", value_parser = clap::value_parser!(u32).range(0..=64))]
     show_boxes: Option<u32>,
@@ -115,6 +117,36 @@ fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
 
 fn parse_sampler(s: &str) -> Result<snell_core::sampling::SamplerKind, String> {
     s.parse()
+}
+
+/// What `--aov` asks for.
+#[derive(Clone, Debug, PartialEq)]
+enum Aov {
+    Heatmap,
+    /// Which of albedo, normal, depth.
+    Layers {
+        albedo: bool,
+        normal: bool,
+        depth: bool,
+    },
+}
+
+fn parse_aov(s: &str) -> Result<Aov, String> {
+    if s == "heatmap" {
+        return Ok(Aov::Heatmap);
+    }
+    let (mut albedo, mut normal, mut depth) = (false, false, false);
+    for part in s.split(',') {
+        match part.trim() {
+            "albedo" => albedo = true,
+            "normal" => normal = true,
+            "depth" => depth = true,
+            other => {
+                return Err(format!("unknown AOV '{other}' (expected heatmap, or a list of albedo, normal, depth)"))
+            }
+        }
+    }
+    Ok(Aov::Layers { albedo, normal, depth })
 }
 
 fn parse_define(s: &str) -> Result<(String, String), String> {
@@ -167,7 +199,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     let mut scene = loaded.scene;
     let s = loaded.settings;
 
-    let settings = RenderSettings {
+    let mut settings = RenderSettings {
         width: args.width.unwrap_or(s.width),
         height: args.height.unwrap_or(s.height),
         spp: args.spp.unwrap_or(s.spp),
@@ -176,8 +208,15 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         filter: s.filter.clone(),
         reconstruction: s.reconstruction,
         sampler: args.sampler.unwrap_or(s.sampler),
+        aovs: false,
     };
     settings.check().map_err(anyhow::Error::msg)?;
+    if matches!(args.aov, Some(Aov::Layers { .. })) {
+        if snell_io::image_out::format_for(&args.output)? != snell_io::image_out::ImageFormat::Exr {
+            bail!("{}: AOVs are written as EXR channels; the output must end in .exr", args.output.display());
+        }
+        settings.aovs = true;
+    }
     let integrator = snell_io::scene::SceneSettings {
         integrator: args.integrator.unwrap_or(s.integrator),
         max_depth: args.max_depth.or(s.max_depth),
@@ -202,7 +241,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
             snell_core::inspect::draw_boxes(img, &scene.camera, b, snell_core::Rgb::new(0.1, 1.0, 0.25));
         }
     };
-    if args.aov.as_deref() == Some("heatmap") {
+    if args.aov == Some(Aov::Heatmap) {
         let t0 = Instant::now();
         let hm = with_world!(&world, w => snell_core::inspect::heat_map(w, &settings));
         let secs = t0.elapsed().as_secs_f64();
@@ -233,13 +272,32 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     );
     let progress = |n: u64| bar.inc(n);
     let t_render = Instant::now();
-    let (mut image, stats) = with_world!(&world, w => render(w, &integrator, &settings, &progress));
+    let (mut image, aovs, stats) = with_world!(&world, w => render_with_aovs(w, &integrator, &settings, &progress));
     overlay(&mut image);
     let render_s = t_render.elapsed().as_secs_f64();
     bar.finish_and_clear();
 
-    snell_io::image_out::write_image(&args.output, &image)
-        .with_context(|| format!("writing {}", args.output.display()))?;
+    match (&args.aov, aovs) {
+        (Some(Aov::Layers { albedo, normal, depth }), Some(a)) => {
+            let mut extra: Vec<(&str, Vec<f32>)> = Vec::new();
+            if *albedo {
+                for (c, name) in ["albedo.R", "albedo.G", "albedo.B"].into_iter().enumerate() {
+                    extra.push((name, a.albedo.iter().map(|v| v[c]).collect()));
+                }
+            }
+            if *normal {
+                for (c, name) in ["normal.X", "normal.Y", "normal.Z"].into_iter().enumerate() {
+                    extra.push((name, a.normal.iter().map(|v| v[c]).collect()));
+                }
+            }
+            if *depth {
+                extra.push(("Z", a.depth.clone()));
+            }
+            snell_io::image_out::write_exr_channels(&args.output, &image, &extra)
+        }
+        _ => snell_io::image_out::write_image(&args.output, &image),
+    }
+    .with_context(|| format!("writing {}", args.output.display()))?;
     print_stats(&stats);
     println!(
         "{}: {}x{} at {} spp with {} ({} triangles): load {:.2} s, build {:.3} s, render {:.2} s, {:.2} Mrays/s",

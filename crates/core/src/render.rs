@@ -2,7 +2,7 @@
 //! Each pixel is computed from its own random streams (see [`crate::sampling`]), so the result
 //! does not depend on how tiles are scheduled: it is bit-identical for any thread count.
 
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use crate::accel::Accel;
@@ -26,6 +26,50 @@ pub struct RenderSettings {
     pub filter: Filter,
     pub reconstruction: Reconstruction,
     pub sampler: SamplerKind,
+    /// Also compute the albedo, normal and depth AOVs (one more camera-ray intersection per
+    /// sample).
+    pub aovs: bool,
+}
+
+/// Auxiliary images of the first surface each camera sample sees, filtered like the image:
+/// albedo ([`crate::material::Material::albedo`]), world-space shading normal (facing the
+/// camera), and depth (distance along the camera ray). Misses contribute zero.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Aovs {
+    pub albedo: Vec<Rgb>,
+    pub normal: Vec<Vec3>,
+    pub depth: Vec<f32>,
+}
+
+/// What one sample adds to a pixel: `Σ w·L`, `Σ w`, and the AOVs weighted alike.
+#[derive(Clone, Copy, Debug, Default)]
+struct Accum {
+    l: Rgb,
+    w: f32,
+    albedo: Rgb,
+    normal: Vec3,
+    depth: f32,
+}
+
+impl Accum {
+    /// Adds the sums of another accumulator (weights included).
+    fn merge(&mut self, o: &Accum) {
+        self.l += o.l;
+        self.w += o.w;
+        self.albedo += o.albedo;
+        self.normal += o.normal;
+        self.depth += o.depth;
+    }
+
+    /// Adds one sample with filter weight `w`.
+    #[inline]
+    fn add(&mut self, s: &Accum, w: f32) {
+        self.l += s.l * w;
+        self.w += w;
+        self.albedo += s.albedo * w;
+        self.normal += s.normal * w;
+        self.depth += s.depth * w;
+    }
 }
 
 /// How samples become pixels.
@@ -52,6 +96,7 @@ impl Default for RenderSettings {
             filter: Filter::default(),
             reconstruction: Reconstruction::default(),
             sampler: SamplerKind::default(),
+            aovs: false,
         }
     }
 }
@@ -92,6 +137,17 @@ pub fn render<A: Accel, I: Integrator>(
     settings: &RenderSettings,
     progress: &(dyn Fn(u64) + Sync),
 ) -> (Image, RayStats) {
+    let (image, _, stats) = render_with_aovs(world, integrator, settings, progress);
+    (image, stats)
+}
+
+/// [`render`], also returning the AOVs when `settings.aovs` asks for them.
+pub fn render_with_aovs<A: Accel, I: Integrator>(
+    world: &World<A>,
+    integrator: &I,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Image, Option<Aovs>, RayStats) {
     let (w, h) = (settings.width, settings.height);
     let tiles: Vec<(u32, u32)> =
         (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
@@ -106,14 +162,13 @@ pub fn render<A: Accel, I: Integrator>(
                 let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
                 // The tile's pixels plus a margin of m: Σ w·L and Σ w per pixel.
                 let bw = (x1 - x0 + 2 * m) as usize;
-                let mut acc = vec![(Rgb::ZERO, 0.0f32); bw * (y1 - y0 + 2 * m) as usize];
+                let mut acc = vec![Accum::default(); bw * (y1 - y0 + 2 * m) as usize];
                 for y in y0..y1 {
                     for x in x0..x1 {
-                        render_pixel(world, integrator, settings, x, y, &mut stats, &mut |film, l| {
+                        render_pixel(world, integrator, settings, x, y, &mut stats, &mut |film, sample| {
                             if !splat {
                                 let i = (y - y0) as usize * bw + (x - x0) as usize;
-                                acc[i].0 += l;
-                                acc[i].1 += 1.0;
+                                acc[i].add(&sample, 1.0);
                                 return;
                             }
                             let (lo_x, hi_x) = (x.saturating_sub(m), (x + m).min(w - 1));
@@ -132,9 +187,7 @@ pub fn render<A: Accel, I: Integrator>(
                                 for (k, px) in (lo_x..=hi_x).enumerate() {
                                     let wt = wx[k] * wy;
                                     if wt != 0.0 {
-                                        let i = row + (px + m - x0) as usize;
-                                        acc[i].0 += l * wt;
-                                        acc[i].1 += wt;
+                                        acc[row + (px + m - x0) as usize].add(&sample, wt);
                                     }
                                 }
                             }
@@ -151,26 +204,29 @@ pub fn render<A: Accel, I: Integrator>(
         Err(_) => work(),
     };
     // Tiles are merged in a fixed order, so the sums (and the image) do not depend on threads.
-    let mut sums = vec![(Rgb::ZERO, 0.0f32); (w * h) as usize];
+    let mut sums = vec![Accum::default(); (w * h) as usize];
     let mut stats = RayStats::default();
     for (x0, y0, acc, s) in results {
         let bw = (TILE.min(w - x0) + 2 * m) as usize;
-        for (i, &(l, wt)) in acc.iter().enumerate() {
+        for (i, a) in acc.iter().enumerate() {
             let (bx, by) = ((i % bw) as i64, (i / bw) as i64);
             let (x, y) = (x0 as i64 + bx - m as i64, y0 as i64 + by - m as i64);
-            if wt != 0.0 && (0..w as i64).contains(&x) && (0..h as i64).contains(&y) {
-                let p = &mut sums[y as usize * w as usize + x as usize];
-                p.0 += l;
-                p.1 += wt;
+            if a.w != 0.0 && (0..w as i64).contains(&x) && (0..h as i64).contains(&y) {
+                sums[y as usize * w as usize + x as usize].merge(a);
             }
         }
         stats.add(&s);
     }
     let mut image = Image::new(w, h);
-    for (p, (l, wt)) in image.pixels.iter_mut().zip(sums) {
-        *p = if wt > 0.0 { l / wt } else { Rgb::ZERO };
+    for (p, a) in image.pixels.iter_mut().zip(&sums) {
+        *p = if a.w > 0.0 { a.l / a.w } else { Rgb::ZERO };
     }
-    (image, stats)
+    let aovs = settings.aovs.then(|| Aovs {
+        albedo: sums.iter().map(|a| if a.w > 0.0 { a.albedo / a.w } else { Rgb::ZERO }).collect(),
+        normal: sums.iter().map(|a| if a.w > 0.0 { a.normal / a.w } else { Vec3::ZERO }).collect(),
+        depth: sums.iter().map(|a| if a.w > 0.0 { a.depth / a.w } else { 0.0 }).collect(),
+    });
+    (image, aovs, stats)
 }
 
 /// Traces the samples of pixel `(x, y)`, handing each one's film position and radiance to
@@ -182,7 +238,7 @@ fn render_pixel<A: Accel, I: Integrator>(
     x: u32,
     y: u32,
     stats: &mut RayStats,
-    sink: &mut impl FnMut(Vec2, Rgb),
+    sink: &mut impl FnMut(Vec2, Accum),
 ) {
     let pixel = y as u64 * s.width as u64 + x as u64;
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
@@ -203,9 +259,19 @@ fn render_pixel<A: Accel, I: Integrator>(
         let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
         let ray = world.scene.camera.ray(film, s.width, s.height, lens_u);
         stats.camera += 1;
+        let mut sample = Accum::default();
+        if s.aovs {
+            if let Some(hit) = world.intersect(&ray, f32::INFINITY) {
+                let o = &world.scene.objects[hit.object as usize];
+                sample.albedo = world.scene.materials[o.material].albedo(hit.uv);
+                sample.normal = if hit.ns.dot(ray.d) > 0.0 { -hit.ns } else { hit.ns };
+                sample.depth = hit.t * ray.d.length();
+            }
+        }
         let l = integrator.radiance(world, &ray, &mut sampler, stats);
         // A non-finite sample (NaN from a degenerate configuration) would poison the pixel;
         // it still counts (as black), so that the estimate stays unbiased where it is finite.
-        sink(film, if l.is_finite() { l } else { Rgb::ZERO });
+        sample.l = if l.is_finite() { l } else { Rgb::ZERO };
+        sink(film, sample);
     }
 }

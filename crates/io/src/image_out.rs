@@ -87,3 +87,33 @@ pub fn check_output(path: &Path) -> Result<(), Error> {
     }
     Ok(())
 }
+
+/// Writes a linear float OpenEXR with the image as `R`, `G`, `B` and further named channels
+/// (`albedo.R`, `normal.X`, `Z`, …), each `width × height` values row by row from the top left.
+/// Written whole or not at all, like [`write_image`].
+pub fn write_exr_channels(path: &Path, image: &Image, extra: &[(&str, Vec<f32>)]) -> Result<(), Error> {
+    use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, WritableImage};
+    if format_for(path)? != ImageFormat::Exr {
+        return Err(Error::new(path, "extra layers (AOVs) need an .exr output"));
+    }
+    let n = (image.width * image.height) as usize;
+    let mut list: Vec<AnyChannel<FlatSamples>> = Vec::new();
+    for (c, name) in ["R", "G", "B"].iter().enumerate() {
+        list.push(AnyChannel::new(*name, FlatSamples::F32(image.pixels.iter().map(|p| p[c]).collect())));
+    }
+    for (name, values) in extra {
+        if values.len() != n {
+            return Err(Error::new(path, format!("channel {name} has {} values for {n} pixels", values.len())));
+        }
+        list.push(AnyChannel::new(*name, FlatSamples::F32(values.clone())));
+    }
+    let layer = Layer::new(
+        (image.width as usize, image.height as usize),
+        LayerAttributes::default(),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(list.into()),
+    );
+    let mut buf = Cursor::new(Vec::new());
+    exr::image::Image::from_layer(layer).write().to_buffered(&mut buf).map_err(|e| Error::new(path, e.to_string()))?;
+    write_atomic(path, &buf.into_inner())
+}

@@ -41,6 +41,7 @@ pub fn render_loaded(l: &LoadedScene, o: &Opts) -> (Image, RayStats) {
         filter: l.settings.filter.clone(),
         reconstruction: l.settings.reconstruction,
         sampler: l.settings.sampler,
+        aovs: false,
     };
     let integrator = snell_io::scene::SceneSettings {
         max_depth: o.max_depth.or(l.settings.max_depth),
@@ -497,4 +498,54 @@ fn path_tracer_is_bit_identical_across_thread_counts() {
     let bits = |i: &Image| i.pixels.iter().flat_map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
     assert_eq!(bits(&a), bits(&b));
     assert_eq!(sa, sb);
+}
+
+#[test]
+fn aovs_are_extra_exr_channels() {
+    use exr::prelude::{read_all_flat_layers_from_file, FlatSamples};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "[render]\nintegrator = \"path\"\n[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\nfov = 10\n\
+                 [materials.m]\ntype = \"diffuse\"\nalbedo = [0.2, 0.4, 0.6]\n\
+                 [[shapes]]\ntype = \"quad\"\ncorner = [-10, -10, 0]\nedge1 = [20, 0, 0]\nedge2 = [0, 20, 0]\nmaterial = \"m\"\n\
+                 [[lights]]\ntype = \"directional\"\ndirection = [0, 0, -1]\nirradiance = 1\n";
+    std::fs::write(dir.path().join("s.toml"), scene).unwrap();
+    let args = ["render", "s.toml", "--width", "9", "--height", "7", "--spp", "4", "--aov", "albedo,normal,depth"];
+    let o = run(&[&args[..], &["-o", "a.exr"]].concat(), dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = read_all_flat_layers_from_file(dir.path().join("a.exr")).unwrap();
+    let layer = &img.layer_data[0];
+    let channel = |name: &str| -> Vec<f32> {
+        let c = layer.channel_data.list.iter().find(|c| c.name.to_string() == name).unwrap_or_else(|| panic!("{name}"));
+        match &c.sample_data {
+            FlatSamples::F32(v) => v.clone(),
+            other => panic!("{other:?}"),
+        }
+    };
+    let centre = 3 * 9 + 4;
+    for (name, want) in [
+        ("albedo.R", 0.2),
+        ("albedo.G", 0.4),
+        ("albedo.B", 0.6),
+        ("normal.X", 0.0),
+        ("normal.Z", 1.0),
+        ("R", 0.2 / std::f32::consts::PI),
+    ] {
+        let v = channel(name)[centre];
+        assert!((v - want).abs() < 1e-3, "{name}: {v} vs {want}");
+    }
+    // Depth: the distance along the ray, 5 at the centre and a little more off-centre.
+    let z = channel("Z");
+    assert!((z[centre] - 5.0).abs() < 0.01, "{}", z[centre]);
+    assert!(z[0] > z[centre]);
+    // AOVs do not change the image.
+    let o = run(&[&args[..8], &["-o", "b.exr"]].concat(), dir.path());
+    assert!(o.status.success());
+    let (a, b) = (image::open(dir.path().join("a.exr")).unwrap(), image::open(dir.path().join("b.exr")).unwrap());
+    assert_eq!(a.to_rgb32f().into_raw(), b.to_rgb32f().into_raw());
+    // PNG cannot hold them.
+    let o = run(&[&args[..], &["-o", "a.png"]].concat(), dir.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains(".exr"), "{}", stderr(&o));
+    let o = run(&["render", "--aov", "colour", "-o", "x.exr"], dir.path());
+    assert_eq!(o.status.code(), Some(2));
 }

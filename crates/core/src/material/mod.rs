@@ -118,6 +118,19 @@ impl Material {
         !self.bsdf(Vec2::ZERO).is_delta()
     }
 
+    /// The surface's colour at `uv` for the albedo AOV: the diffuse albedo where there is one,
+    /// a metal's reflectance at normal incidence, a dielectric's transmittance.
+    pub fn albedo(&self, uv: Vec2) -> Rgb {
+        match self {
+            Material::Diffuse { albedo } | Material::Plastic { diffuse: albedo, .. } => albedo.eval(uv),
+            Material::Conductor { eta, k, .. } => conductor_fresnel(1.0, *eta, *k),
+            Material::Mirror { reflectance } => *reflectance,
+            Material::Dielectric { transmittance, .. } | Material::ThinDielectric { transmittance, .. } => {
+                *transmittance
+            }
+        }
+    }
+
     /// The diffuse albedo at `uv`, for the ambient term.
     pub fn diffuse_albedo(&self, uv: Vec2) -> Rgb {
         match self {
