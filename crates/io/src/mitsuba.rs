@@ -355,6 +355,7 @@ impl Ctx {
         match self.texture(n, name, default)? {
             Texture::Constant(c) => Ok(c),
             Texture::Checker { a, b, .. } => Ok((a + b) * 0.5),
+            Texture::Image { image, .. } => Ok(image.mean()),
         }
     }
 
@@ -396,6 +397,25 @@ impl Ctx {
                     scale *= s;
                 }
                 Ok(Texture::Checker { a, b, scale })
+            }
+            "bitmap" => {
+                let f = self.string(p, "filename").ok_or_else(|| self.files.err(p, "bitmap needs 'filename'"))?;
+                let path = self.resolve(p, f)?;
+                let img = crate::image_in::read_rgb(&path)?;
+                let image = material::ImageTexture::new(img.width, img.height, img.pixels)
+                    .ok_or_else(|| self.files.err(p, "the bitmap is empty"))?;
+                let mut scale = Vec2::ONE;
+                if let Some(t) = p.prop("to_uv") {
+                    let m = self.transform(t)?;
+                    scale = Vec2::new(m.matrix3.x_axis.x, m.matrix3.y_axis.y);
+                    if m.translation != glam::Vec3A::ZERO || m.matrix3.x_axis.y != 0.0 || m.matrix3.y_axis.x != 0.0 {
+                        self.warn(t, "bitmap 'to_uv': only the scale is used");
+                    }
+                }
+                if self.boolean(p, "raw", false)? {
+                    self.warn(p, "'raw' is ignored: 8-bit images are always decoded from sRGB");
+                }
+                Ok(Texture::Image { image: std::sync::Arc::new(image), scale })
             }
             other => {
                 self.warn(p, format!("texture type '{other}' is not supported yet; using grey 0.5"));

@@ -136,10 +136,13 @@ impl<'de> Deserialize<'de> for Color {
     }
 }
 
-/// A colour or a procedural texture: `[r, g, b]`, one number, or
-/// `{ checker = [colour, colour], scale = n }`.
-#[derive(Clone, Copy, Debug)]
-struct Tex(material::Texture);
+/// A colour or a texture: `[r, g, b]`, one number, `{ checker = [colour, colour], scale = n }`,
+/// or `{ image = "file", scale = n }` (read when the material is built, relative to the scene).
+#[derive(Clone, Debug)]
+enum Tex {
+    Ready(material::Texture),
+    Image { file: String, scale: f32 },
+}
 impl<'de> Deserialize<'de> for Tex {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         #[derive(Deserialize)]
@@ -149,24 +152,37 @@ impl<'de> Deserialize<'de> for Tex {
             scale: Option<f32>,
         }
         #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Img {
+            image: String,
+            scale: Option<f32>,
+        }
+        #[derive(Deserialize)]
         #[serde(untagged)]
         enum T {
             C(Color),
             Checker(Checker),
+            Img(Img),
         }
+        let positive = |scale: f32| -> Result<f32, D::Error> {
+            if scale.is_finite() && scale > 0.0 {
+                Ok(scale)
+            } else {
+                Err(serde::de::Error::custom("a texture's scale must be a positive number"))
+            }
+        };
         match T::deserialize(d).map_err(|_| {
             serde::de::Error::custom(
-                "expected a colour ([r, g, b] or one number) or { checker = [colour, colour], scale = n }",
+                "expected a colour ([r, g, b] or one number), { checker = [colour, colour], scale = n } or \
+                 { image = \"file\", scale = n }",
             )
         })? {
-            T::C(c) => Ok(Tex(material::Texture::Constant(c.0))),
+            T::C(c) => Ok(Tex::Ready(material::Texture::Constant(c.0))),
             T::Checker(c) => {
-                let scale = c.scale.unwrap_or(8.0);
-                if !(scale.is_finite() && scale > 0.0) {
-                    return Err(serde::de::Error::custom("a checker's scale must be a positive number"));
-                }
-                Ok(Tex(material::Texture::Checker { a: c.checker[0].0, b: c.checker[1].0, scale }))
+                let scale = positive(c.scale.unwrap_or(8.0))?;
+                Ok(Tex::Ready(material::Texture::Checker { a: c.checker[0].0, b: c.checker[1].0, scale }))
             }
+            T::Img(i) => Ok(Tex::Image { file: i.image, scale: positive(i.scale.unwrap_or(1.0))? }),
         }
     }
 }
@@ -594,7 +610,21 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
     let what = format!("a '{kind}' material");
     let color = |f: &S<Color>, d: Rgb| val(f).map_or(d, |c| c.0);
     let roughness = |d: f32| cx.num(&m.roughness, 0.0, 1.0, "roughness", d);
-    let tex = |d: Rgb| val(&m.albedo).map_or(material::Texture::Constant(d), |t| t.0);
+    let tex = |d: Rgb| -> Result<material::Texture, Error> {
+        match &m.albedo {
+            None => Ok(material::Texture::Constant(d)),
+            Some(t) => match t.get_ref() {
+                Tex::Ready(t) => Ok(t.clone()),
+                Tex::Image { file, scale } => {
+                    let p = cx.path.parent().unwrap_or(Path::new(".")).join(file);
+                    let img = crate::image_in::read_rgb(&p)?;
+                    let image = material::ImageTexture::new(img.width, img.height, img.pixels)
+                        .ok_or_else(|| cx.err(t.span(), "the texture image is empty"))?;
+                    Ok(material::Texture::Image { image: std::sync::Arc::new(image), scale: glam::Vec2::splat(*scale) })
+                }
+            },
+        }
+    };
     // Keys each type accepts; everything else is rejected with its position.
     let allowed: &[&str] = match kind {
         "diffuse" => &["albedo"],
@@ -655,9 +685,9 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
         }
     };
     Ok(match kind {
-        "diffuse" => Material::Diffuse { albedo: tex(Rgb::splat(0.8)) },
+        "diffuse" => Material::Diffuse { albedo: tex(Rgb::splat(0.8))? },
         "glossy" | "plastic" => Material::plastic(
-            tex(Rgb::splat(0.5)),
+            tex(Rgb::splat(0.5))?,
             color(&m.specular, Rgb::ONE),
             ior(1.5)?,
             roughness(if kind == "glossy" { 0.2 } else { 0.0 })?,

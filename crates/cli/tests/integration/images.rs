@@ -549,3 +549,37 @@ fn aovs_are_extra_exr_channels() {
     let o = run(&["render", "--aov", "colour", "-o", "x.exr"], dir.path());
     assert_eq!(o.status.code(), Some(2));
 }
+
+#[test]
+fn image_textures_map_with_v_up() {
+    // An 8×8 PNG: top half red | green, bottom half blue | white (sRGB 255 = linear 1).
+    let dir = tempfile::tempdir().unwrap();
+    let png = image::RgbImage::from_fn(8, 8, |x, y| match (x < 4, y < 4) {
+        (true, true) => image::Rgb([255, 0, 0]),
+        (false, true) => image::Rgb([0, 255, 0]),
+        (true, false) => image::Rgb([0, 0, 255]),
+        (false, false) => image::Rgb([255, 255, 255]),
+    });
+    png.save(dir.path().join("t.png")).unwrap();
+    let src = "[render]\nspp = 1\n[camera]\ntype = \"orthographic\"\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\nscale = 1\n\
+               [materials.m]\ntype = \"diffuse\"\nalbedo = { image = \"t.png\" }\n\
+               [[shapes]]\ntype = \"quad\"\ncorner = [-1, -1, 0]\nedge1 = [2, 0, 0]\nedge2 = [0, 2, 0]\nmaterial = \"m\"\n\
+               [[lights]]\ntype = \"directional\"\ndirection = [0, 0, -1]\nirradiance = 3.14159265\n";
+    std::fs::write(dir.path().join("s.toml"), src).unwrap();
+    let l = snell_io::scene::load(&dir.path().join("s.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let (img, _) = render_loaded(&l, &Opts { width: 8, height: 8, spp: 1, ..Opts::default() });
+    // The image's top left (v near 1) shows the texture's top left.
+    for (x, y, want) in
+        [(1, 1, [1.0, 0.0, 0.0]), (6, 1, [0.0, 1.0, 0.0]), (1, 6, [0.0, 0.0, 1.0]), (6, 6, [1.0, 1.0, 1.0])]
+    {
+        let p = img.get(x, y);
+        assert!((p - snell_core::Rgb::from(want)).abs().max_element() < 0.02, "({x}, {y}): {p}");
+    }
+    let e = snell_io::scene::parse(
+        "[materials.m]\ntype = \"diffuse\"\nalbedo = { image = \"missing.png\" }\n",
+        &dir.path().join("x.toml"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("missing.png"), "{e}");
+}

@@ -68,7 +68,7 @@ impl Whitted {
         };
         let scene = cx.world.scene;
         let obj = &scene.objects[hit.object as usize];
-        let material = scene.materials[obj.material];
+        let material = &scene.materials[obj.material];
         let wo = (-ray.d).normalize();
         let front = wo.dot(hit.ng) > 0.0;
         let mut l = Rgb::ZERO;
@@ -81,11 +81,11 @@ impl Whitted {
             ns = ng;
         }
         if material.has_direct() {
-            l += self.direct(cx, &hit, &material, ng, ns, wo);
+            l += self.direct(cx, &hit, material, ng, ns, wo);
             l += scene.ambient * material.diffuse_albedo(hit.uv);
         }
         let cos_o = ns.dot(wo).clamp(0.0, 1.0);
-        match material {
+        match *material {
             Material::Mirror { reflectance } => {
                 l += self.child(
                     cx,

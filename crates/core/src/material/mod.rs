@@ -17,7 +17,7 @@ use bsdf::{Bsdf, CoatTable, Reflectance};
 use microfacet::{Distribution, Microfacet};
 
 /// A colour that may vary over a surface, looked up by texture coordinates.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Texture {
     Constant(Rgb),
     /// Squares of `a` and `b`, `scale` squares per unit of `u` and of `v`.
@@ -26,21 +26,64 @@ pub enum Texture {
         b: Rgb,
         scale: f32,
     },
+    /// An image, repeated; `uv · scale` indexes it (shared, not copied, between materials).
+    Image {
+        image: std::sync::Arc<ImageTexture>,
+        scale: Vec2,
+    },
+}
+
+/// A linear RGB image for textures, row by row from the top. Texture coordinates have `v = 0`
+/// at the bottom of the image (OBJ's and OpenGL's convention; Mitsuba's after its OBJ reader
+/// flips `v`) and repeat outside `[0, 1)`; lookups are bilinear between pixel centres.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageTexture {
+    pub width: usize,
+    pub height: usize,
+    pub pixels: Vec<Rgb>,
+}
+
+impl ImageTexture {
+    /// `None` unless there are `width · height ≥ 1` pixels.
+    pub fn new(width: usize, height: usize, pixels: Vec<Rgb>) -> Option<ImageTexture> {
+        (width > 0 && height > 0 && pixels.len() == width * height).then_some(ImageTexture { width, height, pixels })
+    }
+
+    pub fn eval(&self, uv: Vec2) -> Rgb {
+        let x = uv.x * self.width as f32 - 0.5;
+        let y = (1.0 - uv.y) * self.height as f32 - 0.5;
+        if !(x.is_finite() && y.is_finite()) {
+            return Rgb::ZERO;
+        }
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let wrap = |i: f32, n: usize| (i as i64).rem_euclid(n as i64) as usize;
+        let px = |i: f32, j: f32| self.pixels[wrap(j, self.height) * self.width + wrap(i, self.width)];
+        let top = px(x0, y0) * (1.0 - fx) + px(x0 + 1.0, y0) * fx;
+        let bottom = px(x0, y0 + 1.0) * (1.0 - fx) + px(x0 + 1.0, y0 + 1.0) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+
+    /// The mean colour.
+    pub fn mean(&self) -> Rgb {
+        self.pixels.iter().sum::<Rgb>() / self.pixels.len() as f32
+    }
 }
 
 impl Texture {
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Rgb {
-        match *self {
-            Texture::Constant(c) => c,
+        match self {
+            Texture::Constant(c) => *c,
             Texture::Checker { a, b, scale } => {
-                let s = (uv * scale).floor();
+                let s = (uv * *scale).floor();
                 if (s.x + s.y).rem_euclid(2.0) < 1.0 {
-                    a
+                    *a
                 } else {
-                    b
+                    *b
                 }
             }
+            Texture::Image { image, scale } => image.eval(uv * *scale),
         }
     }
 }
@@ -52,7 +95,7 @@ impl From<Rgb> for Texture {
 }
 
 /// A surface material. [`Material::bsdf`] gives its BSDF at a surface point.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Material {
     /// Lambertian: `albedo / π`.
     Diffuse { albedo: Texture },
@@ -268,6 +311,20 @@ mod tests {
                 assert!(sum > 0.05, "{m:?} at {deg}°: albedo {sum}");
             }
         }
+    }
+
+    #[test]
+    fn image_texture_is_bilinear_repeats_and_has_v_up() {
+        // 2×2: top row red, green; bottom row blue, white.
+        let img = ImageTexture::new(2, 2, vec![Rgb::X, Rgb::Y, Rgb::Z, Rgb::ONE]).unwrap();
+        // Pixel centres: u = 0.25 / 0.75, v = 0.75 (top) / 0.25 (bottom).
+        assert_eq!(img.eval(Vec2::new(0.25, 0.75)), Rgb::X);
+        assert_eq!(img.eval(Vec2::new(0.75, 0.25)), Rgb::ONE);
+        assert_eq!(img.eval(Vec2::new(1.25, -0.25)), Rgb::X, "repeats");
+        let mid = img.eval(Vec2::new(0.5, 0.75));
+        assert!((mid - Rgb::new(0.5, 0.5, 0.0)).length() < 1e-6, "{mid}");
+        let t = Texture::Image { image: std::sync::Arc::new(img), scale: Vec2::splat(2.0) };
+        assert_eq!(t.eval(Vec2::new(0.125, 0.375)), Rgb::X);
     }
 
     #[test]
