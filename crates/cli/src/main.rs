@@ -3,6 +3,7 @@
 
 mod bench;
 mod diff;
+mod info;
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -38,6 +39,9 @@ enum Command {
     /// Compare an image with a reference: mean colours, RMSE, relative MSE, and optionally a
     /// false-colour error image.
     Diff(diff::DiffArgs),
+    /// What a scene file contains (shapes, triangles, materials, lights, camera, film,
+    /// integrator) and everything that was ignored or approximated.
+    Info(info::InfoArgs),
 }
 
 #[derive(clap::Args)]
@@ -149,7 +153,7 @@ fn parse_aov(s: &str) -> Result<Aov, String> {
     Ok(Aov::Layers { albedo, normal, depth })
 }
 
-fn parse_define(s: &str) -> Result<(String, String), String> {
+pub(crate) fn parse_define(s: &str) -> Result<(String, String), String> {
     match s.split_once('=') {
         Some((k, v)) if !k.is_empty() => Ok((k.to_string(), v.to_string())),
         _ => Err(format!("'{s}': expected NAME=VALUE")),
@@ -162,6 +166,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cmd_render(args),
         Command::Bench(args) => bench::run(args),
         Command::Diff(args) => diff::run(args),
+        Command::Info(args) => info::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -172,7 +177,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(scene: Option<&Path>, defines: &[(String, String)]) -> Result<LoadedScene> {
+pub(crate) fn load(scene: Option<&Path>, defines: &[(String, String)]) -> Result<LoadedScene> {
     let Some(path) = scene else {
         return Ok(snell_io::scene::parse(DEFAULT_SCENE, Path::new("<built-in default scene>"))?);
     };

@@ -68,6 +68,15 @@ impl Default for SceneSettings {
 }
 
 impl SceneSettings {
+    /// The reconstruction filter, as a short description.
+    pub fn filter_name(&self) -> String {
+        match &self.filter {
+            Filter::Box { radius } => format!("box radius {radius}"),
+            Filter::Tent { radius } => format!("tent radius {radius}"),
+            Filter::Gaussian { radius, sigma, .. } => format!("gaussian sigma {sigma} radius {radius}"),
+        }
+    }
+
     /// The integrator these settings describe, with each one's defaults filled in.
     pub fn integrator(&self) -> AnyIntegrator {
         match self.integrator {

@@ -335,3 +335,31 @@ fn veach_mis_matches_mitsuba() {
     // The references were rendered at 256×171 with path max_depth 16 (refs/index.json).
     matches_mitsuba("veach-mis/veach_mis.xml", "veach-mis", 256, 171, 16);
 }
+
+#[test]
+fn info_lists_contents_and_what_was_ignored() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!(
+        "<scene version=\"3.0.0\">{SENSOR}\n<shape type=\"cube\"><bsdf type=\"roughconductor\"/></shape>\n\
+         <shape type=\"sphere\"><emitter type=\"area\"/></shape>\n<shape type=\"hair\"/>\n\
+         <emitter type=\"constant\"/></scene>"
+    );
+    std::fs::write(dir.path().join("s.xml"), text).unwrap();
+    let o = run(&["info", "s.xml"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    for want in [
+        "shapes       2 (1 meshes, 1 spheres",
+        "triangles    12",
+        "1 rough conductor",
+        "lights       2 (1 area, 1 constant environment)",
+        "film         32x24",
+        "integrator   path",
+        "ignored or approximated (1):",
+        "s.xml:8:1: shape type 'hair' is not supported",
+    ] {
+        assert!(out.contains(want), "missing {want:?} in\n{out}");
+    }
+    let o = run(&["info", "nowhere.xml"], dir.path());
+    assert_eq!(o.status.code(), Some(1));
+}
