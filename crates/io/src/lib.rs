@@ -10,6 +10,7 @@ mod error;
 pub mod image_in;
 pub mod image_out;
 pub mod mitsuba;
+pub mod mtl;
 pub mod obj;
 pub mod ply;
 pub mod rays;

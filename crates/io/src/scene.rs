@@ -1039,22 +1039,19 @@ pub fn auto_camera(b: Aabb, width: u32, height: u32) -> Option<Camera> {
 /// A scene around a bare mesh: the mesh in a glossy clay material on a floor, lit by a large
 /// soft area light above and a dim fill light, framed by [`auto_camera`].
 pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
-    let mesh = crate::read_mesh(path)?;
-    let b = mesh.aabb();
+    let clay = Material::plastic(Rgb::new(0.72, 0.66, 0.58).into(), Rgb::splat(0.5), 1.5, 0.25, Distribution::Ggx);
+    let (parts, warnings) = mesh_parts(path, &clay)?;
+    let b = parts.iter().fold(Aabb::EMPTY, |b, (m, _, _)| b.union(m.aabb()));
     let (c, r) = (b.center(), (b.extent().length() * 0.5).max(1e-6));
     let settings = SceneSettings::default();
-    let materials = vec![
-        Material::plastic(Rgb::new(0.72, 0.66, 0.58).into(), Rgb::splat(0.5), 1.5, 0.25, Distribution::Ggx),
-        Material::Diffuse { albedo: Rgb::splat(0.5).into() },
-        Material::Diffuse { albedo: Rgb::ZERO.into() },
-    ];
+    let mut materials =
+        vec![Material::Diffuse { albedo: Rgb::splat(0.5).into() }, Material::Diffuse { albedo: Rgb::ZERO.into() }];
     let floor_y = b.min.y;
     let s = 8.0 * r;
     let light_size = 1.5 * r;
     let light_y = c.y + 3.0 * r;
     let light_corner = Vec3::new(c.x - light_size / 2.0 + r, light_y, c.z - light_size / 2.0 + r);
-    let geometries = vec![
-        Geometry::Mesh(mesh),
+    let mut geometries = vec![
         Geometry::Mesh(Mesh::quad(
             Vec3::new(c.x - s, floor_y, c.z + s),
             Vec3::new(2.0 * s, 0.0, 0.0),
@@ -1066,11 +1063,21 @@ pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
     // Radiance chosen so the light delivers an irradiance of about 3 at the mesh's centre.
     let dist2 = (light_y - c.y).powi(2) + 2.0 * r * r;
     let emission = Rgb::splat(3.0 * dist2 / (light_size * light_size));
-    let objects = vec![
+    let mut objects = vec![
         Object { geometry: 0, transform: None, material: 0, emission: Rgb::ZERO, light_samples: 1 },
-        Object { geometry: 1, transform: None, material: 1, emission: Rgb::ZERO, light_samples: 1 },
-        Object { geometry: 2, transform: None, material: 2, emission, light_samples: 16 },
+        Object { geometry: 1, transform: None, material: 1, emission, light_samples: 16 },
     ];
+    for (mesh, material, emission) in parts {
+        objects.push(Object {
+            geometry: geometries.len(),
+            transform: None,
+            material: materials.len(),
+            emission,
+            light_samples: 1,
+        });
+        geometries.push(Geometry::Mesh(mesh));
+        materials.push(material);
+    }
     let mut scene = Scene {
         geometries,
         objects,
@@ -1088,5 +1095,60 @@ pub fn from_mesh(path: &Path) -> Result<LoadedScene, Error> {
     // Frame the mesh itself, not the floor.
     scene.camera = auto_camera(b, settings.width, settings.height)
         .ok_or_else(|| Error::new(path, "the mesh has no extent to frame"))?;
-    Ok(LoadedScene { scene, settings, frame: Some(b), warnings: Vec::new() })
+    Ok(LoadedScene { scene, settings, frame: Some(b), warnings })
+}
+
+/// A mesh with its material and emission.
+type MeshPart = (Mesh, Material, Rgb);
+
+/// The parts of a bare mesh file with their materials and emission: for an OBJ that assigns
+/// materials (`usemtl`, with `mtllib`), one part per material, from the MTL file; otherwise the
+/// whole mesh in `default`.
+fn mesh_parts(path: &Path, default: &Material) -> Result<(Vec<MeshPart>, Vec<String>), Error> {
+    let is_obj = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    if is_obj {
+        let obj = crate::obj::read_groups(path)?;
+        if obj.has_materials() && !obj.libraries.is_empty() {
+            let mut warnings = Vec::new();
+            let mut library = Vec::new();
+            for (f, line) in &obj.libraries {
+                let p = path.parent().unwrap_or(Path::new(".")).join(f);
+                match crate::mtl::read(&p) {
+                    Ok((m, w)) => {
+                        library.extend(m);
+                        warnings.extend(w);
+                    }
+                    Err(e) => warnings
+                        .push(format!("{}:{line}: mtllib not read ({e}); using the default material", path.display())),
+                }
+            }
+            let mut parts = Vec::new();
+            let mut add = |mut mesh: Mesh, material: Material, emission: Rgb| -> Result<(), Error> {
+                mesh.drop_degenerate_indices();
+                mesh.validate().map_err(|e| Error::new(path, e.to_string()))?;
+                if !mesh.indices.is_empty() {
+                    parts.push((mesh, material, emission));
+                }
+                Ok(())
+            };
+            for (i, name) in obj.materials.iter().enumerate() {
+                match library.iter().find(|m| &m.name == name) {
+                    Some(m) => add(obj.mesh(Some(i)), m.material.clone(), m.emission)?,
+                    None => {
+                        warnings.push(format!(
+                            "{}: material '{name}' is not in any mtllib; using the default",
+                            path.display()
+                        ));
+                        add(obj.mesh(Some(i)), default.clone(), Rgb::ZERO)?;
+                    }
+                }
+            }
+            add(obj.mesh(Some(usize::MAX)), default.clone(), Rgb::ZERO)?;
+            if parts.is_empty() {
+                return Err(Error::new(path, "the mesh has no triangles"));
+            }
+            return Ok((parts, warnings));
+        }
+    }
+    Ok((vec![(crate::read_mesh(path)?, default.clone(), Rgb::ZERO)], Vec::new()))
 }

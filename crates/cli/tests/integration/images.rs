@@ -583,3 +583,31 @@ fn image_textures_map_with_v_up() {
     .to_string();
     assert!(e.contains("missing.png"), "{e}");
 }
+
+#[test]
+fn obj_with_mtl_gets_its_materials() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("m.mtl"),
+        "newmtl red\nKd 0.8 0.1 0.1\nnewmtl glass\nillum 7\nNi 1.5\nnewmtl lamp\nKd 0 0 0\nKe 4 4 4\nmap_Bump b.png\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("m.obj"),
+        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\n\
+         usemtl red\nf 1 2 3\nusemtl glass\nf 1 3 4\nusemtl lamp\nf 5 6 7\nusemtl nothing\nf 1 2 5\n",
+    )
+    .unwrap();
+    let l = snell_io::scene::from_mesh(&dir.path().join("m.obj")).unwrap_or_else(|e| panic!("{e}"));
+    let kinds: Vec<String> = l.scene.objects[2..]
+        .iter()
+        .map(|o| format!("{:?}", l.scene.materials[o.material]).split([' ', '{']).next().unwrap().to_string())
+        .collect();
+    assert_eq!(kinds, ["Diffuse", "Dielectric", "Diffuse", "Plastic"], "{kinds:?}");
+    assert_eq!(l.scene.objects[4].emission, snell_core::Rgb::splat(4.0));
+    assert_eq!(l.scene.triangle_count(), 4 + 2 + 2, "four faces, the floor and the light");
+    assert!(l.warnings.iter().any(|w| w.contains("map_Bump") && w.contains("m.mtl:9:")), "{:?}", l.warnings);
+    assert!(l.warnings.iter().any(|w| w.contains("'nothing'")), "{:?}", l.warnings);
+    let (img, _) = render_loaded(&l, &Opts { width: 8, height: 8, spp: 1, ..Opts::default() });
+    assert!(img.pixels.iter().all(|p| p.is_finite()));
+}
