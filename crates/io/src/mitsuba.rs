@@ -676,32 +676,31 @@ impl Ctx {
                     distribution,
                 )
             }
-            "twosided" => {
-                // Snell's opaque BSDFs already reflect on both sides.
-                let inner = b.children.iter().find(|c| c.tag == "bsdf" || c.tag == "ref").cloned();
-                match inner {
-                    Some(i) => {
-                        let i = if i.tag == "ref" { self.lookup(&i)? } else { i };
-                        self.material(&i)?
-                    }
-                    None => return Err(self.files.err(b, "twosided needs a nested <bsdf>")),
-                }
-            }
+            // Snell's opaque BSDFs already reflect on both sides.
+            "twosided" => match self.nested_material(b)? {
+                Some(m) => m,
+                None => return Err(self.files.err(b, "twosided needs a nested <bsdf>")),
+            },
             "mask" => {
                 self.warn(b, "'mask' (opacity) is not supported: the surface is rendered opaque");
-                match b.children.iter().find(|c| c.tag == "bsdf" || c.tag == "ref").cloned() {
-                    Some(i) => {
-                        let i = if i.tag == "ref" { self.lookup(&i)? } else { i };
-                        self.material(&i)?
-                    }
-                    None => Material::Diffuse { albedo: Texture::Constant(Rgb::splat(0.5)) },
-                }
+                self.nested_material(b)?.unwrap_or(Material::Diffuse { albedo: Texture::Constant(Rgb::splat(0.5)) })
             }
             other => {
                 self.warn(b, format!("BSDF type '{other}' is not supported; using diffuse grey 0.5"));
                 Material::Diffuse { albedo: Texture::Constant(Rgb::splat(0.5)) }
             }
         })
+    }
+
+    /// The material of the `<bsdf>` (or `<ref>` to one) nested in an adapter BSDF.
+    fn nested_material(&mut self, b: &Node) -> Result<Option<Material>, Error> {
+        match b.children.iter().find(|c| c.tag == "bsdf" || c.tag == "ref").cloned() {
+            Some(i) => {
+                let i = if i.tag == "ref" { self.lookup(&i)? } else { i };
+                self.material(&i).map(Some)
+            }
+            None => Ok(None),
+        }
     }
 
     /// The shape's geometry in its own space and the transform placing it.

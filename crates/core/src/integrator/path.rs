@@ -11,8 +11,6 @@
 //! Depth counts path segments, as Mitsuba's `max_depth` does: 1 sees only emitters, 2 adds
 //! direct light, and so on.
 
-use glam::Vec3;
-
 use super::{Integrator, RayStats};
 use crate::accel::Accel;
 use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
@@ -146,7 +144,10 @@ impl Integrator for Path {
                 break;
             }
             beta *= bs.weight;
-            eta_scale *= bs.eta_scale(&bsdf, wo);
+            // Russian roulette takes the 1/η² of refraction back out of the throughput, so that
+            // paths inside glass are not killed for it.
+            let eta = bsdf.eta_across(wo, bs.wi);
+            eta_scale *= eta * eta;
             (prev_pdf, prev_delta, prev_p) = (bs.pdf, bs.delta, hit.p);
             if crosses {
                 stats.refraction += 1;
@@ -167,16 +168,6 @@ impl Integrator for Path {
             }
         }
         l
-    }
-}
-
-impl crate::material::bsdf::BsdfSample {
-    /// `η²` of the boundary this sample crossed (1 for reflection), which Russian roulette
-    /// takes out of the throughput so that paths inside glass are not killed for the `1/η²`.
-    #[inline]
-    fn eta_scale(&self, bsdf: &crate::material::bsdf::Bsdf, wo: Vec3) -> f32 {
-        let e = bsdf.eta_across(wo, self.wi);
-        e * e
     }
 }
 

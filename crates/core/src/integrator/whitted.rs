@@ -116,10 +116,7 @@ impl Whitted {
                 );
             }
             Material::ThinDielectric { ior, transmittance } => {
-                let mut r = fresnel::dielectric(cos_o, ior);
-                if r < 1.0 {
-                    r += (1.0 - r) * (1.0 - r) * r / (1.0 - r * r);
-                }
+                let r = fresnel::thin_slab(cos_o, ior);
                 l += self.child(
                     cx,
                     &hit,

@@ -311,10 +311,7 @@ impl Bsdf<'_> {
                 self.sampled(wo, wi)
             }
             Bsdf::ThinDielectric { eta, tint } => {
-                let mut r = fresnel::dielectric(wo.z.abs(), eta);
-                if r < 1.0 {
-                    r += (1.0 - r) * (1.0 - r) * r / (1.0 - r * r);
-                }
+                let r = fresnel::thin_slab(wo.z, eta);
                 if uc < r {
                     Some(BsdfSample { wi: mirror(wo), weight: Rgb::ONE, pdf: r, delta: true })
                 } else {

@@ -53,6 +53,17 @@ pub fn dielectric(cos_theta_i: f32, eta: f32) -> f32 {
     0.5 * (r_parl * r_parl + r_perp * r_perp)
 }
 
+/// Reflectance of a thin slab of index `eta` (both faces, every internal reflection summed):
+/// `R + T² R / (1 − R²)` with the single-interface `R` at `cos_theta_i` (either side).
+pub fn thin_slab(cos_theta_i: f32, eta: f32) -> f32 {
+    let r = dielectric(cos_theta_i.abs(), eta);
+    if r < 1.0 {
+        r + (1.0 - r) * (1.0 - r) * r / (1.0 - r * r)
+    } else {
+        r
+    }
+}
+
 /// Critical angle (radians) for light going from a medium of index `n_i` into one of `n_t < n_i`.
 pub fn critical_angle(n_i: f32, n_t: f32) -> Option<f32> {
     (n_t < n_i).then(|| (n_t / n_i).asin())
