@@ -15,6 +15,7 @@ pub mod obj;
 pub mod ply;
 pub mod rays;
 pub mod scene;
+pub mod serialized;
 
 pub use error::{Error, Location};
 

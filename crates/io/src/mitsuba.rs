@@ -3,7 +3,8 @@
 //! What is read: `<default>` and `$name` substitution (with `-D name=value` from the command
 //! line taking precedence), `<include>` (relative to the including file, cycles rejected),
 //! `id`s and `<ref>`; transforms (`translate`, `rotate`, `scale`, `matrix`, `lookat`), each
-//! applied after the ones before it, as Mitsuba composes them; shapes `obj`, `ply`, `sphere`,
+//! applied after the ones before it, as Mitsuba composes them; shapes `obj`, `ply`,
+//! `serialized` (with `shape_index`), `sphere`,
 //! `rectangle`, `cube`, `disk`, `shapegroup` + `instance`, with `face_normals` and
 //! `flip_normals`; BSDFs `diffuse`, `dielectric`, `thindielectric`, `roughdielectric`,
 //! `conductor`, `roughconductor`, `plastic`, `roughplastic`, `twosided`; the `checkerboard`
@@ -712,6 +713,17 @@ impl Ctx {
                 let f = self.string(s, "filename").ok_or_else(|| self.files.err(s, "the shape needs 'filename'"))?;
                 let path = self.resolve(s, f)?;
                 crate::read_mesh(&path)?
+            }
+            "serialized" => {
+                let f = self.string(s, "filename").ok_or_else(|| self.files.err(s, "the shape needs 'filename'"))?;
+                let path = self.resolve(s, f)?;
+                let index = self.int(s, "shape_index", 0)?;
+                let index =
+                    usize::try_from(index).map_err(|_| self.files.err(s, "shape_index must not be negative"))?;
+                let mut mesh = crate::serialized::read(&path, index)?;
+                mesh.drop_degenerate_indices();
+                mesh.validate().map_err(|e| Error::new(&path, e.to_string()))?;
+                mesh
             }
             "rectangle" => Mesh::quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0)),
             "cube" => Mesh::cuboid(Vec3::splat(-1.0), Vec3::ONE),
