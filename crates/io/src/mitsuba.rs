@@ -5,10 +5,10 @@
 //! `id`s and `<ref>`; transforms (`translate`, `rotate`, `scale`, `matrix`, `lookat`), each
 //! applied after the ones before it, as Mitsuba composes them; shapes `obj`, `ply`,
 //! `serialized` (with `shape_index`), `sphere`,
-//! `rectangle`, `cube`, `disk`, `shapegroup` + `instance`, with `face_normals` and
+//! `rectangle`, `cube`, `disk`, `cylinder`, `shapegroup` + `instance`, with `face_normals` and
 //! `flip_normals`; BSDFs `diffuse`, `dielectric`, `thindielectric`, `roughdielectric`,
 //! `conductor`, `roughconductor`, `plastic`, `roughplastic`, `twosided`; the `checkerboard`
-//! texture; named indices of refraction and metals; `rgb` and `spectrum` values; emitters
+//! and `bitmap` textures; named indices of refraction and metals; `rgb` and `spectrum` values; emitters
 //! `area`, `point`, `spot`, `directional`, `constant`, `envmap`; the `perspective` and `thinlens` sensors,
 //! `hdrfilm` and its `rfilter`, the sampler's `sample_count` and `seed`; integrators `path` and
 //! `direct`. Units and defaults are Mitsuba's.
@@ -731,6 +731,15 @@ impl Ctx {
                 self.warn(s, "disk tessellated into 128 triangles");
                 disk(128)
             }
+            "cylinder" => {
+                let (p0, p1) = (self.vec3(s, "p0", Vec3::ZERO)?, self.vec3(s, "p1", Vec3::Z)?);
+                let radius = self.float(s, "radius", 1.0)?;
+                if radius <= 0.0 || (p1 - p0).length_squared() == 0.0 {
+                    return Err(self.files.err(s, "the cylinder needs a positive radius and p0 != p1"));
+                }
+                self.warn(s, "cylinder tessellated into 128 quads with smooth normals (open ends, as Mitsuba's)");
+                cylinder(p0, p1, radius, 128)
+            }
             "sphere" => {
                 let center = self.vec3(s, "center", Vec3::ZERO)?;
                 let radius = self.float(s, "radius", 1.0)?;
@@ -931,6 +940,38 @@ fn disk(n: u32) -> Mesh {
     }
     let indices = (0..n).map(|i| [0, 1 + i, 1 + (i + 1) % n]).collect();
     Mesh { positions, normals: None, uvs: Some(uvs), indices }
+}
+
+/// An open cylinder around the segment `p0`–`p1`, normals outward.
+fn cylinder(p0: Vec3, p1: Vec3, radius: f32, n: u32) -> Mesh {
+    let axis = p1 - p0;
+    let (s, t) = snell_core::geometry::orthonormal_basis(axis.normalize());
+    let (mut positions, mut normals, mut uvs) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..n {
+        let a = i as f32 / n as f32 * std::f32::consts::TAU;
+        let radial = s * a.cos() + t * a.sin();
+        for (end, v) in [(p0, 0.0), (p1, 1.0)] {
+            positions.push(end + radial * radius);
+            normals.push(radial);
+            uvs.push(Vec2::new(i as f32 / n as f32, v));
+        }
+    }
+    let mut indices = Vec::new();
+    for i in 0..n {
+        let (a0, a1) = (2 * i, 2 * i + 1);
+        let (b0, b1) = (2 * ((i + 1) % n), 2 * ((i + 1) % n) + 1);
+        indices.push([a0, b0, b1]);
+        indices.push([a0, b1, a1]);
+    }
+    // Wind so that the faces look outward (the winding normal agrees with the radial one).
+    let tri = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|i| positions[i as usize]);
+        (b - a).cross(c - a)
+    };
+    if tri(&indices[0]).dot(normals[0] + normals[2]) < 0.0 {
+        indices.iter_mut().for_each(|t| t.swap(1, 2));
+    }
+    Mesh { positions, normals: Some(normals), uvs: Some(uvs), indices }
 }
 
 /// Loads a Mitsuba 3 scene. `defines` are `-D name=value` settings, which take precedence over

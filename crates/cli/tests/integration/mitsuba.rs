@@ -454,3 +454,24 @@ fn serialized_meshes_with_shape_index() {
     let e = snell_io::mitsuba::load(&dir.path().join("s.xml"), &[]).unwrap_err().to_string();
     assert!(e.contains("not a Mitsuba serialized mesh"), "{e}");
 }
+
+#[test]
+fn cylinders_and_disks_are_tessellated_facing_out() {
+    let l = load_xml(
+        r#"<shape type="cylinder"><point name="p1" x="0" y="0" z="2"/><float name="radius" value="0.5"/></shape>
+           <shape type="disk"><transform name="to_world"><scale value="3"/></transform></shape>"#,
+    )
+    .unwrap();
+    let b = mesh_box(&l, 0);
+    assert!((b.min - Vec3::new(-0.5, -0.5, 0.0)).abs().max_element() < 1e-4, "{b:?}");
+    assert!((b.max - Vec3::new(0.5, 0.5, 2.0)).abs().max_element() < 1e-4, "{b:?}");
+    let Geometry::Mesh(m) = &l.scene.geometries[0] else { panic!() };
+    for t in &m.indices {
+        let [a, b, c] = t.map(|i| m.positions[i as usize]);
+        let centre = (a + b + c) / 3.0;
+        let outward = Vec3::new(centre.x, centre.y, 0.0);
+        assert!((b - a).cross(c - a).dot(outward) > 0.0, "a face looks inward");
+    }
+    assert!((mesh_box(&l, 1).max.x - 3.0).abs() < 1e-5);
+    assert_eq!(l.warnings.len(), 2, "both are reported as tessellated: {:?}", l.warnings);
+}
