@@ -19,7 +19,7 @@ pub struct InfoArgs {
 }
 
 fn material_kind(m: &Material) -> &'static str {
-    match m {
+    match m.surface() {
         Material::Diffuse { .. } => "diffuse",
         Material::Plastic { roughness, .. } if *roughness > 0.0 => "rough plastic",
         Material::Plastic { .. } => "plastic",
@@ -29,6 +29,7 @@ fn material_kind(m: &Material) -> &'static str {
         Material::Dielectric { roughness, .. } if *roughness > 0.0 => "rough dielectric",
         Material::Dielectric { .. } => "dielectric",
         Material::ThinDielectric { .. } => "thin dielectric",
+        Material::OneSided(_) => "one-sided",
     }
 }
 
@@ -72,18 +73,19 @@ pub fn run(args: InfoArgs) -> Result<()> {
     println!("triangles    {} (rendered), {} stored", scene.triangle_count(), {
         scene.geometries.iter().map(|g| if let Geometry::Mesh(m) = g { m.indices.len() } else { 0 }).sum::<usize>()
     });
-    let mut kinds: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut kinds: BTreeMap<String, usize> = BTreeMap::new();
     for m in &scene.materials {
-        *kinds.entry(material_kind(m)).or_default() += 1;
+        let k = material_kind(m);
+        *kinds.entry(if m.two_sided() { k.to_string() } else { format!("{k} (one-sided)") }).or_default() += 1;
     }
-    let list = |k: &BTreeMap<&str, usize>| k.iter().map(|(n, c)| format!("{c} {n}")).collect::<Vec<_>>().join(", ");
+    let list = |k: &BTreeMap<String, usize>| k.iter().map(|(n, c)| format!("{c} {n}")).collect::<Vec<_>>().join(", ");
     println!("materials    {} ({})", scene.materials.len(), list(&kinds));
-    let mut lk: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut lk: BTreeMap<String, usize> = BTreeMap::new();
     for l in &scene.lights {
-        *lk.entry(light_kind(l)).or_default() += 1;
+        *lk.entry(light_kind(l).to_string()).or_default() += 1;
     }
     if emitters > 0 {
-        *lk.entry("area").or_default() += emitters;
+        *lk.entry("area".to_string()).or_default() += emitters;
     }
     println!("lights       {} ({})", lk.values().sum::<usize>(), if lk.is_empty() { "none".into() } else { list(&lk) });
     let c = &scene.camera;

@@ -605,7 +605,15 @@ impl Ctx {
                 return Ok(m);
             }
         }
-        let m = self.material(&b)?;
+        let mut m = self.material(&b)?;
+        // Mitsuba's opaque BSDFs reflect on the front only, unless wrapped in `twosided`.
+        let opaque = matches!(
+            m,
+            Material::Diffuse { .. } | Material::Plastic { .. } | Material::Conductor { .. } | Material::Mirror { .. }
+        );
+        if opaque && b.attr("type") != Some("twosided") {
+            m = Material::OneSided(Box::new(m));
+        }
         let idx = self.materials.len();
         self.materials.push(m);
         if let Some(id) = b.attr("id") {
@@ -677,9 +685,8 @@ impl Ctx {
                     distribution,
                 )
             }
-            // Snell's opaque BSDFs already reflect on both sides.
             "twosided" => match self.nested_material(b)? {
-                Some(m) => m,
+                Some(m) => m.surface().clone(),
                 None => return Err(self.files.err(b, "twosided needs a nested <bsdf>")),
             },
             "mask" => {
@@ -807,8 +814,9 @@ impl Ctx {
         let material = match material {
             Some(m) => m,
             None => {
-                // Mitsuba's default BSDF: diffuse with reflectance 0.5.
-                self.materials.push(Material::Diffuse { albedo: Texture::Constant(Rgb::splat(0.5)) });
+                // Mitsuba's default BSDF: diffuse with reflectance 0.5 (one-sided).
+                let d = Material::Diffuse { albedo: Texture::Constant(Rgb::splat(0.5)) };
+                self.materials.push(Material::OneSided(Box::new(d)));
                 self.materials.len() - 1
             }
         };

@@ -125,7 +125,7 @@ fn bsdfs_map_to_materials() {
            <shape type="sphere"><ref id="rp"/></shape>"#,
     )
     .unwrap();
-    let mat = |i: usize| &l.scene.materials[l.scene.objects[i].material];
+    let mat = |i: usize| l.scene.materials[l.scene.objects[i].material].surface();
     match mat(0) {
         Material::Plastic { ior, roughness, distribution, .. } => {
             assert!((ior - 2.0 / 1.000277).abs() < 1e-5);
@@ -150,6 +150,9 @@ fn bsdfs_map_to_materials() {
     assert!(matches!(mat(4), Material::ThinDielectric { .. }));
     // A referenced BSDF is converted once.
     assert_eq!(l.scene.objects[0].material, l.scene.objects[5].material);
+    // Mitsuba's opaque BSDFs are one-sided unless wrapped in `twosided`; dielectrics see both sides.
+    let sided: Vec<bool> = (0..6).map(|i| l.scene.materials[l.scene.objects[i].material].two_sided()).collect();
+    assert_eq!(sided, [false, true, false, true, true, false]);
 }
 
 #[test]
@@ -185,7 +188,7 @@ fn includes_resolve_relative_and_cycles_are_errors() {
         r#"<scene version="3.0.0"><bsdf type="diffuse" id="m"><rgb name="reflectance" value="0.3"/></bsdf></scene>"#;
     let (_d, l) = load_files(&[("main.xml", &main), ("parts/a.xml", a)], &[]);
     let l = l.unwrap();
-    assert!(matches!(l.scene.materials[l.scene.objects[0].material], Material::Diffuse { .. }));
+    assert!(matches!(l.scene.materials[l.scene.objects[0].material].surface(), Material::Diffuse { .. }));
     let cyc = r#"<scene version="3.0.0"><include filename="b.xml"/></scene>"#;
     let cyc_b = r#"<scene version="3.0.0"><include filename="a.xml"/></scene>"#;
     let (_d, e) = load_files(&[("a.xml", cyc), ("b.xml", cyc_b)], &[]);
@@ -474,4 +477,24 @@ fn cylinders_and_disks_are_tessellated_facing_out() {
     }
     assert!((mesh_box(&l, 1).max.x - 3.0).abs() < 1e-5);
     assert_eq!(l.warnings.len(), 2, "both are reported as tessellated: {:?}", l.warnings);
+}
+
+#[test]
+fn one_sided_surfaces_are_black_from_behind() {
+    // The camera at z = 5 looks at the back of a rectangle facing -z, under a white sky.
+    let scene = |bsdf: &str| {
+        load_xml(&format!(
+            r#"<emitter type="constant"/>
+               <shape type="rectangle"><transform name="to_world"><scale value="20"/><rotate y="1" angle="180"/></transform>{bsdf}</shape>"#
+        ))
+        .unwrap()
+    };
+    let centre = |l: &LoadedScene| {
+        let (img, _) = render_loaded(l, &Opts { width: 8, height: 6, spp: 16, ..Opts::default() });
+        img.get(4, 3)
+    };
+    let one = centre(&scene(r#"<bsdf type="diffuse"/>"#));
+    let two = centre(&scene(r#"<bsdf type="twosided"><bsdf type="diffuse"/></bsdf>"#));
+    assert_eq!(one, Vec3::ZERO, "a one-sided back is black");
+    assert!(two.x > 0.3, "a two-sided back reflects the sky: {two}");
 }

@@ -89,6 +89,9 @@ impl Integrator for Path {
                 break;
             }
             let material = &scene.materials[obj.material];
+            if !material.two_sided() && !front {
+                break; // The back of a one-sided surface reflects nothing.
+            }
             let bsdf = material.bsdf(hit.uv);
             // Opaque surfaces are two-sided: turn the frame to the side the path arrives from.
             // Dielectrics keep the outward normal, whose side tells inside from outside.

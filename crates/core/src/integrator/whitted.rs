@@ -71,6 +71,10 @@ impl Whitted {
         let material = &scene.materials[obj.material];
         let wo = (-ray.d).normalize();
         let front = wo.dot(hit.ng) > 0.0;
+        if !material.two_sided() && !front {
+            return Rgb::ZERO; // The back of a one-sided surface: black (and it emits only in front).
+        }
+        let material = material.surface();
         let mut l = Rgb::ZERO;
         if front && obj.emission != Rgb::ZERO {
             l += obj.emission;

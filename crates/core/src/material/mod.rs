@@ -116,6 +116,10 @@ pub enum Material {
     /// A thin pane of index `ior`: reflects, and transmits without bending (all internal
     /// reflections summed).
     ThinDielectric { ior: f32, transmittance: Rgb },
+    /// An opaque material that reflects on the front side only (the side of the geometric
+    /// normal) and is black from behind, as Mitsuba's BSDFs are unless wrapped in `twosided`.
+    /// Snell's own materials are two-sided.
+    OneSided(Box<Material>),
 }
 
 #[inline]
@@ -130,10 +134,23 @@ impl Material {
         Material::Plastic { diffuse, specular, ior, roughness, distribution, coat }
     }
 
+    /// The material itself, without the one-sided wrapper.
+    pub fn surface(&self) -> &Material {
+        match self {
+            Material::OneSided(m) => m.surface(),
+            m => m,
+        }
+    }
+
+    /// Whether the surface reflects on both sides (all but [`Material::OneSided`]).
+    pub fn two_sided(&self) -> bool {
+        !matches!(self, Material::OneSided(_))
+    }
+
     /// The BSDF at a point with texture coordinates `uv`, in the local shading frame.
     #[inline]
     pub fn bsdf(&self, uv: Vec2) -> Bsdf<'_> {
-        match self {
+        match self.surface() {
             Material::Diffuse { albedo } => Bsdf::Diffuse { albedo: albedo.eval(uv) },
             Material::Plastic { diffuse, specular, ior, roughness, distribution, coat } => Bsdf::Plastic {
                 diffuse: diffuse.eval(uv),
@@ -153,6 +170,7 @@ impl Material {
                 Bsdf::Dielectric { eta: *ior, mf: microfacet(*roughness, *distribution), tint: *transmittance }
             }
             Material::ThinDielectric { ior, transmittance } => Bsdf::ThinDielectric { eta: *ior, tint: *transmittance },
+            Material::OneSided(_) => Bsdf::Diffuse { albedo: Rgb::ZERO }, // `surface` unwraps it
         }
     }
 
@@ -164,19 +182,20 @@ impl Material {
     /// The surface's colour at `uv` for the albedo AOV: the diffuse albedo where there is one,
     /// a metal's reflectance at normal incidence, a dielectric's transmittance.
     pub fn albedo(&self, uv: Vec2) -> Rgb {
-        match self {
+        match self.surface() {
             Material::Diffuse { albedo } | Material::Plastic { diffuse: albedo, .. } => albedo.eval(uv),
             Material::Conductor { eta, k, .. } => conductor_fresnel(1.0, *eta, *k),
             Material::Mirror { reflectance } => *reflectance,
             Material::Dielectric { transmittance, .. } | Material::ThinDielectric { transmittance, .. } => {
                 *transmittance
             }
+            Material::OneSided(_) => Rgb::ZERO, // `surface` unwraps it
         }
     }
 
     /// The diffuse albedo at `uv`, for the ambient term.
     pub fn diffuse_albedo(&self, uv: Vec2) -> Rgb {
-        match self {
+        match self.surface() {
             Material::Diffuse { albedo } | Material::Plastic { diffuse: albedo, .. } => albedo.eval(uv),
             _ => Rgb::ZERO,
         }
