@@ -307,6 +307,7 @@ struct MaterialDef {
     transmittance: S<Color>,
     base: S<Color>,
     distribution: S<String>,
+    two_sided: Option<Spanned<bool>>,
 }
 
 #[derive(Deserialize)]
@@ -636,13 +637,13 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
     };
     // Keys each type accepts; everything else is rejected with its position.
     let allowed: &[&str] = match kind {
-        "diffuse" => &["albedo"],
-        "glossy" | "plastic" => &["albedo", "specular", "roughness", "ior", "distribution"],
-        "conductor" => &["metal", "eta", "k", "roughness", "distribution"],
-        "mirror" => &["reflectance"],
+        "diffuse" => &["albedo", "two_sided"],
+        "glossy" | "plastic" => &["albedo", "specular", "roughness", "ior", "distribution", "two_sided"],
+        "conductor" => &["metal", "eta", "k", "roughness", "distribution", "two_sided"],
+        "mirror" => &["reflectance", "two_sided"],
         "dielectric" => &["ior", "transmittance", "roughness", "distribution"],
         "thindielectric" => &["ior", "transmittance"],
-        "glazed" => &["ior", "base"],
+        "glazed" => &["ior", "base", "two_sided"],
         _ => {
             return Err(cx.err(
                 m.kind.span(),
@@ -653,8 +654,9 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
             ))
         }
     };
-    let present: [(&str, Option<Range<usize>>); 11] = [
+    let present: [(&str, Option<Range<usize>>); 12] = [
         ("distribution", m.distribution.as_ref().map(|s| s.span())),
+        ("two_sided", m.two_sided.as_ref().map(|s| s.span())),
         ("albedo", m.albedo.as_ref().map(|s| s.span())),
         ("specular", m.specular.as_ref().map(|s| s.span())),
         ("roughness", m.roughness.as_ref().map(|s| s.span())),
@@ -693,7 +695,7 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
             return Err(cx.err(span, format!("unknown microfacet distribution '{other}' (expected ggx or beckmann)")))
         }
     };
-    Ok(match kind {
+    let material = match kind {
         "diffuse" => Material::Diffuse { albedo: tex(Rgb::splat(0.8))? },
         "glossy" | "plastic" => Material::plastic(
             tex(Rgb::splat(0.5))?,
@@ -727,6 +729,11 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
             Material::ThinDielectric { ior: ior(1.5)?, transmittance: color(&m.transmittance, Rgb::ONE) }
         }
         _ => Material::plastic(color(&m.base, Rgb::ZERO).into(), Rgb::ONE, ior(1.5)?, 0.0, distribution),
+    };
+    // Opaque materials are two-sided unless `two_sided = false` (Mitsuba's default).
+    Ok(match &m.two_sided {
+        Some(t) if !*t.get_ref() => Material::OneSided(Box::new(material)),
+        _ => material,
     })
 }
 

@@ -611,3 +611,25 @@ fn obj_with_mtl_gets_its_materials() {
     let (img, _) = render_loaded(&l, &Opts { width: 8, height: 8, spp: 1, ..Opts::default() });
     assert!(img.pixels.iter().all(|p| p.is_finite()));
 }
+
+#[test]
+fn two_sided_false_makes_the_back_black() {
+    // The camera looks at the back of a quad facing away, lit by an environment on both sides.
+    let scene = |two_sided: &str| {
+        format!(
+            "[render]\nintegrator = \"path\"\n[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\nfov = 10\n\
+             [[lights]]\ntype = \"environment\"\n\
+             [materials.m]\ntype = \"diffuse\"\nalbedo = 0.5\n{two_sided}\n\
+             [[shapes]]\ntype = \"quad\"\ncorner = [-10, -10, 0]\nedge1 = [0, 20, 0]\nedge2 = [20, 0, 0]\nmaterial = \"m\"\n"
+        )
+    };
+    let o = Opts { width: 4, height: 4, spp: 16, ..Opts::default() };
+    let (one, _) = render_src(&scene("two_sided = false"), &o);
+    let (two, _) = render_src(&scene(""), &o);
+    assert_eq!(one.get(2, 2), snell_core::Rgb::ZERO);
+    assert!((two.get(2, 2).x - 0.5).abs() < 0.05, "{}", two.get(2, 2));
+    let e = snell_io::scene::parse("[materials.g]\ntype = \"dielectric\"\ntwo_sided = false\n", Path::new("g.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("'two_sided' does not apply"), "{e}");
+}
