@@ -21,7 +21,7 @@ use glam::Vec3;
 use super::{Integrator, RayStats};
 use crate::accel::Accel;
 use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
-use crate::material::{conductor_fresnel, fresnel, Material};
+use crate::material::{conductor_fresnel, fresnel, Frame, Material};
 use crate::sampling::{stratified_2d, Pcg32, Sampler};
 use crate::scene::{Intersection, World};
 use crate::Rgb;
@@ -192,7 +192,9 @@ impl Whitted {
     /// Direct light from every light source, with shadow rays.
     fn direct<A: Accel>(&self, cx: &mut Ctx<A>, hit: &Intersection, m: &Material, ng: Vec3, ns: Vec3, wo: Vec3) -> Rgb {
         // A dielectric's frame keeps its outward normal: which side the path is on sets η.
-        let n_bsdf = if m.bsdf(hit.uv).transmits() { hit.ns } else { ns };
+        let bsdf = m.bsdf(hit.uv);
+        let frame = Frame::new(if bsdf.transmits() { hit.ns } else { ns });
+        let wo_local = frame.to_local(wo);
         let mut sum = Rgb::ZERO;
         for (li, light) in cx.world.lights.iter().enumerate() {
             if matches!(light, crate::light::Light::Environment(_)) {
@@ -208,7 +210,7 @@ impl Whitted {
                 if ls.wi.dot(ng) <= 0.0 {
                     continue; // Light below the geometric surface.
                 }
-                let f = m.eval_direct(n_bsdf, wo, ls.wi, hit.uv);
+                let f = bsdf.eval(wo_local, frame.to_local(ls.wi));
                 if f.max_element() <= 0.0 || ls.value.max_element() <= 0.0 {
                     continue;
                 }

@@ -4,7 +4,7 @@
 //! The Whitted integrator treats two kinds of scattering differently: *delta* lobes (ideal
 //! mirror reflection and refraction) spawn new rays of the ray tree, while the *non-delta*
 //! parts (Lambertian, microfacet lobes) are evaluated only against the lights
-//! ([`Material::eval_direct`]). The path integrator samples all of them.
+//! (`Bsdf::eval` on the shadow rays). The path integrator samples all of them.
 
 pub mod bsdf;
 pub mod fresnel;
@@ -200,14 +200,6 @@ impl Material {
             _ => Rgb::ZERO,
         }
     }
-
-    /// The non-delta BSDF times the cosine, `f(wo, wi) |n · wi|`, for light arriving from `wi`
-    /// (world space). `n` is the shading normal on the side of `wo`, `uv` the texture
-    /// coordinates.
-    pub fn eval_direct(&self, n: Vec3, wo: Vec3, wi: Vec3, uv: Vec2) -> Rgb {
-        let f = Frame::new(n);
-        self.bsdf(uv).eval(f.to_local(wo), f.to_local(wi))
-    }
 }
 
 /// An orthonormal shading frame: `n` is the local `z` axis.
@@ -277,13 +269,19 @@ pub fn named_ior(name: &str) -> Option<f32> {
 mod tests {
     use super::*;
 
+    /// `f(wo, wi) |n · wi|` in world space, with shading normal `n`.
+    fn eval_world(m: &Material, n: Vec3, wo: Vec3, wi: Vec3) -> Rgb {
+        let f = Frame::new(n);
+        m.bsdf(Vec2::ZERO).eval(f.to_local(wo), f.to_local(wi))
+    }
+
     #[test]
     fn lambertian_is_albedo_over_pi_times_cosine() {
         let m = Material::Diffuse { albedo: Rgb::splat(0.5).into() };
         let wi = Vec3::new(0.6, 0.0, 0.8);
-        let v = m.eval_direct(Vec3::Z, Vec3::Z, wi, Vec2::ZERO);
+        let v = eval_world(&m, Vec3::Z, Vec3::Z, wi);
         assert!((v.x - 0.5 * std::f32::consts::FRAC_1_PI * 0.8).abs() < 1e-7);
-        assert_eq!(m.eval_direct(Vec3::Z, Vec3::Z, -wi, Vec2::ZERO), Rgb::ZERO);
+        assert_eq!(eval_world(&m, Vec3::Z, Vec3::Z, -wi), Rgb::ZERO);
     }
 
     #[test]
@@ -293,7 +291,7 @@ mod tests {
         let mirror = fresnel::reflect(wo, Vec3::Z);
         let off = Vec3::new(-0.2, 0.3, 0.93).normalize();
         assert!(
-            m.eval_direct(Vec3::Z, wo, mirror, Vec2::ZERO).x > 10.0 * m.eval_direct(Vec3::Z, wo, off, Vec2::ZERO).x
+            eval_world(&m, Vec3::Z, wo, mirror).x > 10.0 * eval_world(&m, Vec3::Z, wo, off).x
         );
     }
 
@@ -323,7 +321,7 @@ mod tests {
                         let ph = (j as f32 + 0.5) / np as f32 * std::f32::consts::TAU;
                         let wi = Vec3::new(st * ph.cos(), st * ph.sin(), ct);
                         let dw = std::f32::consts::TAU / (nt * np) as f32;
-                        sum += (m.eval_direct(Vec3::Z, wo, wi, Vec2::ZERO).x * dw) as f64;
+                        sum += (eval_world(&m, Vec3::Z, wo, wi).x * dw) as f64;
                     }
                 }
                 assert!(sum <= 1.01, "{m:?} at {deg}°: albedo {sum}");
