@@ -240,11 +240,9 @@ impl Light {
 
 impl Light {
     /// The solid-angle density with which [`Light::sample`] at `p` picks the direction
-    /// towards `q`, a point on this light with unit normal `nq` (0 for delta lights).
+    /// towards `q`, a point on this area light with unit normal `nq` (0 for delta lights; an
+    /// environment's density is [`Environment::pdf`] of the direction).
     pub fn pdf(&self, p: Vec3, q: Vec3, nq: Vec3) -> f32 {
-        if let Light::Environment(e) = self {
-            return e.pdf(q - p);
-        }
         let Light::Area(a) = self else { return 0.0 };
         match &a.shape {
             AreaShape::Sphere(s) => {

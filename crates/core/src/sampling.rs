@@ -155,10 +155,6 @@ impl Sampler {
         Sampler { kind, rng: Pcg32::for_sample(seed, pixel, index as u64), key, index, spp: spp.max(1), dim: 0 }
     }
 
-    pub fn kind(&self) -> SamplerKind {
-        self.kind
-    }
-
     /// The independent stream behind this sample (for strategies that stratify on their own).
     pub fn rng(&mut self) -> &mut Pcg32 {
         &mut self.rng

@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use snell_core::image::srgb_decode;
 use snell_core::Rgb;
 
 use crate::{Error, Location};
@@ -12,14 +13,6 @@ pub struct RgbImage {
     pub width: usize,
     pub height: usize,
     pub pixels: Vec<Rgb>,
-}
-
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 /// Reads `.hdr`, `.exr`, `.pfm` or `.png` into linear RGB (alpha dropped).
@@ -43,7 +36,7 @@ pub fn read_rgb(path: &Path) -> Result<RgbImage, Error> {
         .map(|p| {
             let c = Rgb::from(p.0);
             if integer && format == image::ImageFormat::Png {
-                Rgb::new(srgb_to_linear(c.x), srgb_to_linear(c.y), srgb_to_linear(c.z))
+                c.map(srgb_decode)
             } else {
                 c
             }

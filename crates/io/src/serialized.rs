@@ -23,7 +23,7 @@ const DOUBLE: u32 = 0x2000;
 pub fn read(path: &Path, shape_index: usize) -> Result<Mesh, Error> {
     let bytes = crate::read_file(path)?;
     let at = |offset: usize, m: String| Error::at(path, Location::Byte(offset as u64), m);
-    let u16_at = |o: usize| bytes.get(o..o + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+    let u16_at = |o: usize| bytes.get(o..o.checked_add(2)?).map(|b| u16::from_le_bytes([b[0], b[1]]));
     let start = if shape_index == 0 {
         0
     } else {
@@ -48,7 +48,7 @@ pub fn read(path: &Path, shape_index: usize) -> Result<Mesh, Error> {
             u32::from_le_bytes(b.try_into().unwrap_or([0; 4])) as usize
         }
     };
-    match (u16_at(start), u16_at(start + 2)) {
+    match (u16_at(start), u16_at(start.saturating_add(2))) {
         (Some(MAGIC), Some(v @ (3 | 4))) => parse(&bytes[start + 4..], v, start + 4).map_err(|(o, m)| at(o, m)),
         (Some(MAGIC), Some(v)) => Err(at(start + 2, format!("serialized version {v} (expected 3 or 4)"))),
         _ => Err(at(start, "not a Mitsuba serialized mesh (no 0x041C header)".into())),

@@ -448,6 +448,14 @@ fn serialized_meshes_with_shape_index() {
     std::fs::write(dir.path().join("s.xml"), text.replace("value=\"1\"", "value=\"5\"")).unwrap();
     let e = snell_io::mitsuba::load(&dir.path().join("s.xml"), &[]).unwrap_err().to_string();
     assert!(e.contains("m.serialized: at byte") && e.contains("holds 2 meshes"), "{e}");
+    // A table pointing beyond every address: an error, not an overflow.
+    let mut far = file.clone();
+    let n = far.len();
+    far[n - 12..n - 4].copy_from_slice(&u64::MAX.to_le_bytes());
+    std::fs::write(dir.path().join("m.serialized"), &far).unwrap();
+    std::fs::write(dir.path().join("s.xml"), &text).unwrap();
+    let e = snell_io::mitsuba::load(&dir.path().join("s.xml"), &[]).unwrap_err().to_string();
+    assert!(e.contains("not a Mitsuba serialized mesh"), "{e}");
     let mut bad = file.clone();
     bad.truncate(20);
     std::fs::write(dir.path().join("m.serialized"), &bad).unwrap();

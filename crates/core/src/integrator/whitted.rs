@@ -21,6 +21,7 @@ use glam::Vec3;
 use super::{Integrator, RayStats};
 use crate::accel::Accel;
 use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
+use crate::material::bsdf::Bsdf;
 use crate::material::{conductor_fresnel, fresnel, Frame, Material};
 use crate::sampling::{stratified_2d, Pcg32, Sampler};
 use crate::scene::{Intersection, World};
@@ -84,8 +85,9 @@ impl Whitted {
         if ns.dot(wo) <= 0.0 {
             ns = ng;
         }
-        if material.has_direct() {
-            l += self.direct(cx, &hit, material, ng, ns, wo);
+        let bsdf = material.bsdf(hit.uv);
+        if !bsdf.is_delta() {
+            l += self.direct(cx, &hit, &bsdf, ng, ns, wo);
             l += scene.ambient * material.diffuse_albedo(hit.uv);
         }
         let cos_o = ns.dot(wo).clamp(0.0, 1.0);
@@ -190,9 +192,8 @@ impl Whitted {
     }
 
     /// Direct light from every light source, with shadow rays.
-    fn direct<A: Accel>(&self, cx: &mut Ctx<A>, hit: &Intersection, m: &Material, ng: Vec3, ns: Vec3, wo: Vec3) -> Rgb {
+    fn direct<A: Accel>(&self, cx: &mut Ctx<A>, hit: &Intersection, bsdf: &Bsdf, ng: Vec3, ns: Vec3, wo: Vec3) -> Rgb {
         // A dielectric's frame keeps its outward normal: which side the path is on sets η.
-        let bsdf = m.bsdf(hit.uv);
         let frame = Frame::new(if bsdf.transmits() { hit.ns } else { ns });
         let wo_local = frame.to_local(wo);
         let mut sum = Rgb::ZERO;

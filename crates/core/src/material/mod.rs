@@ -174,11 +174,6 @@ impl Material {
         }
     }
 
-    /// Whether the material has a non-delta part that direct lighting must evaluate.
-    pub fn has_direct(&self) -> bool {
-        !self.bsdf(Vec2::ZERO).is_delta()
-    }
-
     /// The surface's colour at `uv` for the albedo AOV: the diffuse albedo where there is one,
     /// a metal's reflectance at normal incidence, a dielectric's transmittance.
     pub fn albedo(&self, uv: Vec2) -> Rgb {
@@ -290,9 +285,7 @@ mod tests {
         let wo = Vec3::new(0.5, 0.0, 0.866).normalize();
         let mirror = fresnel::reflect(wo, Vec3::Z);
         let off = Vec3::new(-0.2, 0.3, 0.93).normalize();
-        assert!(
-            eval_world(&m, Vec3::Z, wo, mirror).x > 10.0 * eval_world(&m, Vec3::Z, wo, off).x
-        );
+        assert!(eval_world(&m, Vec3::Z, wo, mirror).x > 10.0 * eval_world(&m, Vec3::Z, wo, off).x);
     }
 
     #[test]
