@@ -38,6 +38,17 @@ impl Camera {
         Some(Camera { eye, forward, right, up, projection })
     }
 
+    /// A camera from its frame as a scene file gives it: the image's `right` and `up` and the
+    /// view direction `forward`, orthonormalised (`forward` kept, `up` made perpendicular).
+    /// `right` may make a left-handed frame, which mirrors the picture as the file asks.
+    pub fn with_frame(eye: Vec3, right: Vec3, up: Vec3, forward: Vec3, projection: Projection) -> Option<Camera> {
+        let mut camera = Camera::look_at(eye, eye + forward, up, projection)?;
+        if right.dot(camera.right) < 0.0 {
+            camera.right = -camera.right;
+        }
+        Some(camera)
+    }
+
     pub fn forward(&self) -> Vec3 {
         self.forward
     }
@@ -110,6 +121,18 @@ mod tests {
         assert_eq!(a.d, b.d);
         assert!((a.o - Vec3::new(-2.0, 2.0, 1.0)).length() < 1e-6);
         assert!((b.o - Vec3::new(2.0, -2.0, 1.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn a_left_handed_frame_mirrors_the_image() {
+        let p = Projection::Perspective { fov_y: 60.0 };
+        let c = Camera::look_at(Vec3::ZERO, -Vec3::Z, Vec3::Y, p).unwrap();
+        let same = Camera::with_frame(Vec3::ZERO, Vec3::X, Vec3::Y, -Vec3::Z, p).unwrap();
+        let mirrored = Camera::with_frame(Vec3::ZERO, -Vec3::X, Vec3::Y, -Vec3::Z, p).unwrap();
+        let film = Vec2::new(10.0, 40.0);
+        assert_eq!(same, c);
+        let (a, b) = (c.ray(film, 100, 100, Vec2::ZERO), mirrored.ray(film, 100, 100, Vec2::ZERO));
+        assert!(a.d.x < 0.0 && (b.d - Vec3::new(-a.d.x, a.d.y, a.d.z)).length() < 1e-6);
     }
 
     #[test]

@@ -84,7 +84,8 @@ impl Environment {
         Vec2::new(u, v)
     }
 
-    fn direction(uv: Vec2) -> Vec3 {
+    /// The direction in the environment's frame of image coordinates `uv` (the inverse of the lookup).
+    pub fn direction(uv: Vec2) -> Vec3 {
         let phi = uv.x * 2.0 * PI;
         let theta = uv.y * PI;
         Vec3::new(theta.sin() * phi.sin(), theta.cos(), -theta.sin() * phi.cos())

@@ -12,10 +12,13 @@ pub mod image_out;
 pub mod mitsuba;
 pub mod mtl;
 pub mod obj;
+pub mod pbrt;
 pub mod ply;
 pub mod rays;
 pub mod scene;
 pub mod serialized;
+mod shapes;
+pub mod spectrum;
 
 pub use error::{Error, Location};
 

@@ -38,6 +38,7 @@ use snell_core::shape::{Mesh, Sphere};
 use snell_core::Rgb;
 
 use crate::scene::{LoadedScene, SceneSettings};
+use crate::{shapes, spectrum};
 use crate::{Error, Location};
 
 /// One XML element, with where it came from.
@@ -353,11 +354,7 @@ impl Ctx {
     /// A colour: `<rgb>`, `<spectrum>` (uniform value, `λ:value` pairs or a file), a number, or
     /// a texture (see [`Ctx::texture`]; here its mean).
     fn color(&mut self, n: &Node, name: &str, default: Rgb) -> Result<Rgb, Error> {
-        match self.texture(n, name, default)? {
-            Texture::Constant(c) => Ok(c),
-            Texture::Checker { a, b, .. } => Ok((a + b) * 0.5),
-            Texture::Image { image, .. } => Ok(image.mean()),
-        }
+        Ok(self.texture(n, name, default)?.mean())
     }
 
     fn texture(&mut self, n: &Node, name: &str, default: Rgb) -> Result<Texture, Error> {
@@ -425,9 +422,23 @@ impl Ctx {
         }
     }
 
-    /// A spectrum to RGB: the mean over 400–500, 500–600 and 600–700 nm for blue, green and
-    /// red (an approximation of Mitsuba's spectral upsampling, noted as such).
+    /// A spectrum to RGB through the CIE 1931 observer, normalised as Mitsuba's RGB variants
+    /// do (see [`crate::spectrum`]): emitted quantities (`radiance`, `irradiance`,
+    /// `intensity`) as absolute colours, everything else white-balanced. A `blackbody` spectrum
+    /// (which Mitsuba's RGB variants refuse) gives Planck's radiance in W/(m² sr nm).
     fn spectrum(&mut self, p: &Node) -> Result<Rgb, Error> {
+        let kind = match p.attr("name") {
+            Some("radiance" | "irradiance" | "intensity") => spectrum::Kind::Emission,
+            _ => spectrum::Kind::Reflectance,
+        };
+        if p.attr("type") == Some("blackbody") {
+            let t = self.float(p, "temperature", f32::NAN)?;
+            let scale = self.float(p, "scale", 1.0)?;
+            let c = spectrum::blackbody(t)
+                .ok_or_else(|| self.files.err(p, "a blackbody needs a positive 'temperature' in kelvin"))?;
+            self.warn(p, format!("blackbody at {t} K converted to RGB {c} (Mitsuba's spectral units)"));
+            return Ok(c * scale);
+        }
         let pairs: Vec<(f32, f32)> = if let Some(f) = p.attr("filename") {
             let path = self.resolve(p, f)?;
             let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
@@ -458,21 +469,10 @@ impl Ctx {
             }
             v
         };
-        if pairs.is_empty() {
-            return Err(self.files.err(p, "empty spectrum"));
-        }
-        self.warn(p, "spectrum converted to RGB by band averages (approximate)");
-        let band = |lo: f32, hi: f32| {
-            let n = 50;
-            (0..n)
-                .map(|i| {
-                    let l = lo + (hi - lo) * (i as f32 + 0.5) / n as f32;
-                    interpolate(&pairs, l)
-                })
-                .sum::<f32>()
-                / n as f32
-        };
-        Ok(Rgb::new(band(600.0, 700.0), band(500.0, 600.0), band(400.0, 500.0)))
+        let c = spectrum::to_rgb(&pairs, kind)
+            .ok_or_else(|| self.files.err(p, "the spectrum needs wavelengths in increasing order"))?;
+        self.warn(p, "spectrum converted to RGB through the CIE 1931 observer (rendered in RGB)");
+        Ok(c)
     }
 
     fn resolve(&self, n: &Node, f: &str) -> Result<PathBuf, Error> {
@@ -736,7 +736,7 @@ impl Ctx {
             "cube" => Mesh::cuboid(Vec3::splat(-1.0), Vec3::ONE),
             "disk" => {
                 self.warn(s, "disk tessellated into 128 triangles");
-                disk(128)
+                shapes::disk(128)
             }
             "cylinder" => {
                 let (p0, p1) = (self.vec3(s, "p0", Vec3::ZERO)?, self.vec3(s, "p1", Vec3::Z)?);
@@ -745,7 +745,7 @@ impl Ctx {
                     return Err(self.files.err(s, "the cylinder needs a positive radius and p0 != p1"));
                 }
                 self.warn(s, "cylinder tessellated into 128 quads with smooth normals (open ends, as Mitsuba's)");
-                cylinder(p0, p1, radius, 128)
+                shapes::cylinder(p0, p1, radius, 128)
             }
             "sphere" => {
                 let center = self.vec3(s, "center", Vec3::ZERO)?;
@@ -767,27 +767,11 @@ impl Ctx {
             mesh.normals = None;
         }
         if self.boolean(s, "flip_normals", false)? {
-            for t in mesh.indices.iter_mut() {
-                t.swap(1, 2);
-            }
-            if let Some(n) = mesh.normals.as_mut() {
-                n.iter_mut().for_each(|v| *v = -*v);
-            }
+            shapes::flip(&mut mesh, true);
         }
         // Meshes are placed in world space, as Mitsuba does (instances keep their transform).
         if let Some(m) = to_world {
-            let t = Transform::try_new(m).ok_or_else(|| self.files.err(s, "the transform is not invertible"))?;
-            for p in mesh.positions.iter_mut() {
-                *p = t.point(*p);
-            }
-            if let Some(n) = mesh.normals.as_mut() {
-                n.iter_mut().for_each(|v| *v = t.normal(*v));
-            }
-            if m.matrix3.determinant() < 0.0 {
-                for tri in mesh.indices.iter_mut() {
-                    tri.swap(1, 2);
-                }
-            }
+            shapes::bake(&mut mesh, m).ok_or_else(|| self.files.err(s, "the transform is not invertible"))?;
         }
         Ok(Some((Geometry::Mesh(mesh), None)))
     }
@@ -922,64 +906,6 @@ impl Ctx {
         }
         Ok(())
     }
-}
-
-fn interpolate(pairs: &[(f32, f32)], l: f32) -> f32 {
-    if l <= pairs[0].0 {
-        return pairs[0].1;
-    }
-    for w in pairs.windows(2) {
-        if l <= w[1].0 {
-            let t = (l - w[0].0) / (w[1].0 - w[0].0).max(1e-6);
-            return w[0].1 + t * (w[1].1 - w[0].1);
-        }
-    }
-    pairs[pairs.len() - 1].1
-}
-
-/// The unit disk in the `z = 0` plane, facing `+z`.
-fn disk(n: u32) -> Mesh {
-    let mut positions = vec![Vec3::ZERO];
-    let mut uvs = vec![Vec2::splat(0.5)];
-    for i in 0..n {
-        let a = i as f32 / n as f32 * std::f32::consts::TAU;
-        positions.push(Vec3::new(a.cos(), a.sin(), 0.0));
-        uvs.push(Vec2::new(0.5 + 0.5 * a.cos(), 0.5 + 0.5 * a.sin()));
-    }
-    let indices = (0..n).map(|i| [0, 1 + i, 1 + (i + 1) % n]).collect();
-    Mesh { positions, normals: None, uvs: Some(uvs), indices }
-}
-
-/// An open cylinder around the segment `p0`–`p1`, normals outward.
-fn cylinder(p0: Vec3, p1: Vec3, radius: f32, n: u32) -> Mesh {
-    let axis = p1 - p0;
-    let (s, t) = snell_core::geometry::orthonormal_basis(axis.normalize());
-    let (mut positions, mut normals, mut uvs) = (Vec::new(), Vec::new(), Vec::new());
-    for i in 0..n {
-        let a = i as f32 / n as f32 * std::f32::consts::TAU;
-        let radial = s * a.cos() + t * a.sin();
-        for (end, v) in [(p0, 0.0), (p1, 1.0)] {
-            positions.push(end + radial * radius);
-            normals.push(radial);
-            uvs.push(Vec2::new(i as f32 / n as f32, v));
-        }
-    }
-    let mut indices = Vec::new();
-    for i in 0..n {
-        let (a0, a1) = (2 * i, 2 * i + 1);
-        let (b0, b1) = (2 * ((i + 1) % n), 2 * ((i + 1) % n) + 1);
-        indices.push([a0, b0, b1]);
-        indices.push([a0, b1, a1]);
-    }
-    // Wind so that the faces look outward (the winding normal agrees with the radial one).
-    let tri = |t: &[u32; 3]| {
-        let [a, b, c] = t.map(|i| positions[i as usize]);
-        (b - a).cross(c - a)
-    };
-    if tri(&indices[0]).dot(normals[0] + normals[2]) < 0.0 {
-        indices.iter_mut().for_each(|t| t.swap(1, 2));
-    }
-    Mesh { positions, normals: Some(normals), uvs: Some(uvs), indices }
 }
 
 /// Loads a Mitsuba 3 scene. `defines` are `-D name=value` settings, which take precedence over
@@ -1200,12 +1126,8 @@ fn sensor_camera(cx: &mut Ctx, s: &Node, thin: bool, width: u32, height: u32) ->
     } else {
         Projection::Perspective { fov_y }
     };
-    // Mitsuba's camera space: +z forward, +y up, +x to the left of the image. A transform whose
-    // x axis points to the image's right mirrors the picture, which a look-at camera cannot.
-    let right = forward.cross(up);
-    if m.transform_vector3(Vec3::X).dot(right) > 0.0 {
-        cx.warn(s, "the sensor's transform mirrors the image; rendered unmirrored");
-    }
-    Camera::look_at(eye, eye + forward, up, projection)
+    // Mitsuba's camera space: +z forward, +y up, +x to the left of the image; a transform
+    // that mirrors it mirrors the picture.
+    Camera::with_frame(eye, -m.transform_vector3(Vec3::X), up, forward, projection)
         .ok_or_else(|| cx.files.err(s, "the sensor's transform has no valid view direction"))
 }

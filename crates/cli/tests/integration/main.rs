@@ -7,4 +7,5 @@ mod common;
 mod diff;
 mod images;
 mod mitsuba;
+mod pbrt;
 mod shared_scenes;

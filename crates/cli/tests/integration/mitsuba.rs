@@ -303,11 +303,26 @@ fn matches_mitsuba_with(
     sampler: SamplerKind,
     max_ratio: f64,
 ) {
-    let (Some(p), Some(dir)) = (shared_scene(scene), refs_dir()) else { return };
+    let Some(p) = shared_scene(scene) else { return };
     let mut l = snell_io::mitsuba::load(&p, &[]).unwrap_or_else(|e| panic!("{e}"));
     l.settings.sampler = sampler;
+    compare_with_mitsuba(scene, &l, refs, width, height, max_depth, max_ratio);
+}
+
+/// Renders `l` at 64 spp and asserts that its relative MSE against Mitsuba's reference `refs`
+/// is at most `max_ratio` times that of Mitsuba's own 64-spp renders, and its mean within 2 %.
+pub(crate) fn compare_with_mitsuba(
+    name: &str,
+    l: &LoadedScene,
+    refs: &str,
+    width: u32,
+    height: u32,
+    max_depth: u32,
+    max_ratio: f64,
+) {
+    let Some(dir) = refs_dir() else { return };
     let o = Opts { width, height, spp: 64, max_depth: Some(max_depth), ..Opts::default() };
-    let (img, _) = render_loaded(&l, &o);
+    let (img, _) = render_loaded(l, &o);
     let reference = read_exr(&dir.join(refs).join("ref.exr"));
     let test = pixels(&img);
     let ours = relmse(&test, &reference);
@@ -316,9 +331,9 @@ fn matches_mitsuba_with(
     let peer = peers.iter().sum::<f64>() / 4.0;
     let mean = |v: &[[f32; 3]]| v.iter().map(|p| (p[0] + p[1] + p[2]) as f64).sum::<f64>() / v.len() as f64;
     let bias = mean(&test) / mean(&reference) - 1.0;
-    eprintln!("{scene}: relMSE {ours:.5}, Mitsuba 64 spp {peer:.5} (ratio {:.3}), mean {bias:+.4}", ours / peer);
-    assert!(ours <= max_ratio * peer, "{scene}: relMSE {ours} against Mitsuba's own 64-spp {peer} ({peers:?})");
-    assert!(bias.abs() < 0.02, "{scene}: mean off by {bias}");
+    eprintln!("{name}: relMSE {ours:.5}, Mitsuba 64 spp {peer:.5} (ratio {:.3}), mean {bias:+.4}", ours / peer);
+    assert!(ours <= max_ratio * peer, "{name}: relMSE {ours} against Mitsuba's own 64-spp {peer} ({peers:?})");
+    assert!(bias.abs() < 0.02, "{name}: mean off by {bias}");
 }
 
 #[test]

@@ -71,6 +71,15 @@ impl ImageTexture {
 }
 
 impl Texture {
+    /// The average colour over the texture.
+    pub fn mean(&self) -> Rgb {
+        match self {
+            Texture::Constant(c) => *c,
+            Texture::Checker { a, b, .. } => (*a + *b) * 0.5,
+            Texture::Image { image, .. } => image.mean(),
+        }
+    }
+
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Rgb {
         match self {
