@@ -495,7 +495,7 @@ impl Ctx {
     }
 
     fn spectrum_pairs(&mut self, at: At, nums: &[f32], kind: spectrum::Kind) -> Result<Rgb, Error> {
-        if nums.len() < 2 || nums.len() % 2 != 0 {
+        if nums.len() < 2 || !nums.len().is_multiple_of(2) {
             return Err(self.files.err(at, "a spectrum needs (wavelength, value) pairs"));
         }
         let pairs: Vec<(f32, f32)> = nums.chunks(2).map(|c| (c[0], c[1])).collect();
@@ -1281,10 +1281,8 @@ pub fn load(path: &Path) -> Result<LoadedScene, Error> {
                     "Accelerator" => {
                         cx.warn(at, "the Accelerator is chosen by Snell (--accel); ignored");
                     }
-                    "ColorSpace" => {
-                        if ty != "srgb" {
-                            cx.warn(at, format!("color space '{ty}' is ignored: colours are taken as linear sRGB"));
-                        }
+                    "ColorSpace" if ty != "srgb" => {
+                        cx.warn(at, format!("color space '{ty}' is ignored: colours are taken as linear sRGB"));
                     }
                     "MakeNamedMedium" => {}
                     "Material" => {
@@ -1501,7 +1499,7 @@ fn finish(mut cx: Ctx, path: &Path) -> Result<LoadedScene, Error> {
     }
     if let Some((ty, p, at)) = cx.sampler.take() {
         settings.spp = match ty.as_str() {
-            "stratified" => (cx.int(&p, "xsamples", 4)? * cx.int(&p, "ysamples", 4)?) as i64,
+            "stratified" => cx.int(&p, "xsamples", 4)? * cx.int(&p, "ysamples", 4)?,
             _ => cx.int(&p, "pixelsamples", 16)?,
         }
         .clamp(1, 1 << 20) as u32;
