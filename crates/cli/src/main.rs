@@ -189,8 +189,12 @@ pub(crate) fn load(scene: Option<&Path>, defines: &[(String, String)]) -> Result
         Some("toml") => snell_io::scene::load(path)?,
         Some("xml") => snell_io::mitsuba::load(path, defines)?,
         Some("pbrt") => snell_io::pbrt::load(path)?,
+        Some("gltf") | Some("glb") => snell_io::gltf::load(path)?,
         Some("obj") | Some("ply") => snell_io::scene::from_mesh(path)?,
-        _ => bail!("{}: unsupported scene format (expected .toml, .xml, .pbrt, .obj or .ply)", path.display()),
+        _ => bail!(
+            "{}: unsupported scene format (expected .toml, .xml, .pbrt, .gltf, .glb, .obj or .ply)",
+            path.display()
+        ),
     })
 }
 

@@ -7,6 +7,7 @@
 //! user input.
 
 mod error;
+pub mod gltf;
 pub mod image_in;
 pub mod image_out;
 pub mod mitsuba;

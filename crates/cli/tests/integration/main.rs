@@ -5,6 +5,7 @@ mod bad_input;
 mod bench;
 mod common;
 mod diff;
+mod gltf;
 mod images;
 mod mitsuba;
 mod pbrt;
