@@ -521,3 +521,34 @@ fn one_sided_surfaces_are_black_from_behind() {
     assert_eq!(one, Vec3::ZERO, "a one-sided back is black");
     assert!(two.x > 0.3, "a two-sided back reflects the sky: {two}");
 }
+
+#[test]
+fn spectra_and_black_bodies_become_rgb() {
+    let l = load_xml(
+        r#"<emitter type="point">
+               <spectrum name="intensity" type="blackbody"><float name="temperature" value="3000"/></spectrum>
+           </emitter>
+           <emitter type="point"><spectrum name="intensity" value="400:2, 550:8, 700:3"/></emitter>
+           <shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" value="400:0.2, 550:0.8, 700:0.3"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    let intensity = |i: usize| match l.scene.lights[i] {
+        snell_core::light::Light::Point { intensity, .. } => intensity,
+        ref other => panic!("{other:?}"),
+    };
+    // Planck's radiance at 3000 K in W/(m² sr nm): red, and large.
+    let bb = intensity(0);
+    assert!(bb.x > bb.y && bb.y > bb.z && bb.y > 100.0, "{bb:?}");
+    // Emission and reflectance spectra as Mitsuba 3.9.1's RGB variants convert them.
+    let e = intensity(1);
+    assert!((e - Vec3::new(6.79281, 7.11634, 3.33954)).abs().max_element() < 0.25, "{e:?}");
+    match &l.scene.materials[l.scene.objects[0].material].surface() {
+        Material::Diffuse { albedo: snell_core::material::Texture::Constant(c) } => {
+            assert!((*c - Vec3::new(0.561923, 0.744912, 0.377663)).abs().max_element() < 0.02, "{c:?}")
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(l.warnings.iter().any(|w| w.contains("blackbody")), "{:?}", l.warnings);
+    let e = load_xml(r#"<emitter type="point"><spectrum name="intensity" type="blackbody"/></emitter>"#).unwrap_err();
+    assert!(e.contains("temperature"), "{e}");
+}
