@@ -134,12 +134,40 @@ impl Scene {
                         }
                     })
                     .collect();
-                let cdf = build_cdf(tris.iter().map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()));
-                AreaShape::Triangles { tris, cdf }
+                match rectangle(m, &tris) {
+                    Some(r) => r,
+                    None => {
+                        let cdf = build_cdf(tris.iter().map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()));
+                        AreaShape::Triangles { tris, cdf }
+                    }
+                }
             }
         };
         AreaLight { object: index as u32, emission: o.emission, samples: o.light_samples.max(1), shape }
     }
+}
+
+/// A two-triangle mesh that is a rectangle split along a diagonal (Mitsuba's `rectangle`, an
+/// OBJ quad), as an area light shape that is sampled by solid angle; `tris` are its world-space
+/// triangles. `None` for anything else.
+fn rectangle(m: &Mesh, tris: &[[Vec3; 3]]) -> Option<AreaShape> {
+    let ([i0, i1], [t0, t1]) =
+        (<[[u32; 3]; 2]>::try_from(m.indices.as_slice()).ok()?, <[[Vec3; 3]; 2]>::try_from(tris).ok()?);
+    // The diagonal is the edge both share; the other two corners are opposite each other.
+    let shared: Vec<usize> = (0..3).filter(|&k| i1.contains(&i0[k])).collect();
+    let [a, b] = <[usize; 2]>::try_from(shared).ok()?;
+    let c = 3 - a - b;
+    let d = (0..3).find(|&k| !i0.contains(&i1[k]))?;
+    let (corner, opposite) = (t0[c], t1[d]);
+    let (ex, ey) = (t0[a] - corner, t0[b] - corner);
+    let size = ex.length() + ey.length();
+    let n0 = (t0[1] - t0[0]).cross(t0[2] - t0[0]);
+    let n1 = (t1[1] - t1[0]).cross(t1[2] - t1[0]);
+    let rect = ex.dot(ey).abs() <= 1e-5 * ex.length() * ey.length()
+        && (corner + ex + ey - opposite).length() <= 1e-5 * size
+        && n0.normalize_or_zero().dot(n1.normalize_or_zero()) > 0.9999;
+    let normal = n0.normalize_or_zero();
+    (rect && normal != Vec3::ZERO && size.is_finite()).then_some(AreaShape::Rectangle { corner, ex, ey, normal })
 }
 
 /// The boxes of the parts of triangle `t` inside `part` below and above the plane
@@ -589,5 +617,59 @@ impl<'s, A: Accel> World<'s, A> {
             ns = ng;
         }
         Intersection { t, p, ng, ns, uv, object: obj }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad(corner: Vec3, e1: Vec3, e2: Vec3) -> Mesh {
+        let mut m = Mesh::quad(corner, e1, e2);
+        m.validate().unwrap();
+        m
+    }
+
+    #[test]
+    fn emitting_rectangles_are_sampled_as_rectangles() {
+        let shape = |m: Mesh, transform: Option<Transform>| {
+            let camera = crate::camera::Camera::look_at(
+                Vec3::Z,
+                Vec3::ZERO,
+                Vec3::Y,
+                crate::camera::Projection::Perspective { fov_y: 40.0 },
+            )
+            .unwrap();
+            let scene = Scene {
+                geometries: vec![Geometry::Mesh(m)],
+                objects: Vec::new(),
+                materials: Vec::new(),
+                lights: Vec::new(),
+                camera,
+                background: Rgb::ZERO,
+                ambient: Rgb::ZERO,
+                light_selection: LightSelection::Power,
+            };
+            let o = Object { geometry: 0, transform, material: 0, emission: Rgb::ONE, light_samples: 1 };
+            scene.area_light(0, &o).shape
+        };
+        let r = shape(quad(Vec3::ZERO, Vec3::X * 2.0, Vec3::Y), None);
+        match r {
+            AreaShape::Rectangle { ex, ey, normal, .. } => {
+                assert!((ex.length() * ey.length() - 2.0).abs() < 1e-6);
+                assert!((normal - Vec3::Z).length() < 1e-6, "the winding's side: {normal:?}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // Moved and turned, still a rectangle; a parallelogram and a single triangle are not.
+        let t = Transform::try_new(glam::Affine3A::from_rotation_x(0.5) * glam::Affine3A::from_translation(Vec3::ONE));
+        assert!(matches!(shape(quad(Vec3::ZERO, Vec3::X, Vec3::Y), t), AreaShape::Rectangle { .. }));
+        assert!(matches!(
+            shape(quad(Vec3::ZERO, Vec3::X, Vec3::new(0.5, 1.0, 0.0)), None),
+            AreaShape::Triangles { .. }
+        ));
+        let mut tri = quad(Vec3::ZERO, Vec3::X, Vec3::Y);
+        tri.indices.truncate(1);
+        assert!(matches!(shape(tri, None), AreaShape::Triangles { .. }));
     }
 }
