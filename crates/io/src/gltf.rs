@@ -20,8 +20,8 @@
 //! UVs have `v` down in glTF and are flipped to Snell's `v` up.
 //!
 //! Everything approximated or ignored is reported in [`LoadedScene::warnings`], naming the
-//! file and the element (`materials[2] "name"`); malformed files are errors, with the line and
-//! column where the JSON is wrong.
+//! file, the line where the element starts and the element (`materials[2] "name"`); malformed
+//! files are errors, with the line and column where the JSON is wrong.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -59,6 +59,8 @@ fn gltf_error(path: &Path, e: gltf::Error) -> Error {
 
 struct Ctx<'a> {
     path: &'a Path,
+    /// Line of each top-level array element in the JSON (`"materials[2]"`).
+    lines: HashMap<String, usize>,
     buffers: &'a [gltf::buffer::Data],
     images: &'a [gltf::image::Data],
     warnings: Vec<String>,
@@ -76,6 +78,81 @@ struct Ctx<'a> {
     bounds: Aabb,
 }
 
+/// The line on which each element of a top-level array starts (`"materials[2]"` → 41), read
+/// from the JSON text, so that warnings can name file, line and element. (The JSON parser gives
+/// positions for syntax errors only.)
+fn element_lines(text: &[u8]) -> HashMap<String, usize> {
+    enum C {
+        Obj { key: String, expect_key: bool },
+        Arr(usize),
+    }
+    let mut out = HashMap::new();
+    let mut stack: Vec<C> = Vec::new();
+    let (mut line, mut i) = (1usize, 0usize);
+    let mut in_scalar = false;
+    let record = |stack: &[C], out: &mut HashMap<String, usize>, line: usize| {
+        if let [C::Obj { key, .. }, C::Arr(k)] = stack {
+            out.entry(format!("{key}[{k}]")).or_insert(line);
+        }
+    };
+    while i < text.len() {
+        let c = text[i];
+        let scalar = !matches!(c, b'"' | b'{' | b'}' | b'[' | b']' | b',' | b':') && !c.is_ascii_whitespace();
+        if !scalar {
+            in_scalar = false;
+        }
+        match c {
+            b'\n' => line += 1,
+            b'"' => {
+                let start = i + 1;
+                i += 1;
+                while i < text.len() && text[i] != b'"' {
+                    if text[i] == b'\\' {
+                        i += 1;
+                    }
+                    i += 1;
+                }
+                let s = String::from_utf8_lossy(&text[start..i.min(text.len())]).into_owned();
+                match stack.last_mut() {
+                    Some(C::Obj { key, expect_key }) if *expect_key => {
+                        *key = s;
+                        *expect_key = false;
+                    }
+                    _ => record(&stack, &mut out, line),
+                }
+            }
+            b'{' | b'[' => {
+                record(&stack, &mut out, line);
+                stack.push(if c == b'{' { C::Obj { key: String::new(), expect_key: true } } else { C::Arr(0) });
+            }
+            b'}' | b']' => {
+                stack.pop();
+            }
+            b',' => match stack.last_mut() {
+                Some(C::Arr(k)) => *k += 1,
+                Some(C::Obj { expect_key, .. }) => *expect_key = true,
+                None => {}
+            },
+            _ if scalar && !in_scalar => {
+                in_scalar = true;
+                record(&stack, &mut out, line);
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    out
+}
+
+/// The JSON text of a `.gltf`, or the JSON chunk of a `.glb`.
+fn json_text(bytes: &[u8]) -> &[u8] {
+    if bytes.len() >= 20 && &bytes[0..4] == b"glTF" && &bytes[16..20] == b"JSON" {
+        let len = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+        return bytes.get(20..20 + len).unwrap_or(&[]);
+    }
+    bytes
+}
+
 fn element(kind: &str, index: usize, name: Option<&str>) -> String {
     match name {
         Some(n) => format!("{kind}[{index}] \"{n}\""),
@@ -85,7 +162,11 @@ fn element(kind: &str, index: usize, name: Option<&str>) -> String {
 
 impl<'a> Ctx<'a> {
     fn warn(&mut self, what: &str, msg: impl AsRef<str>) {
-        let s = format!("{}: {what}: {}", self.path.display(), msg.as_ref());
+        let key = what.split([' ', '.']).next().unwrap_or(what);
+        let s = match self.lines.get(key) {
+            Some(line) => format!("{}:{line}: {what}: {}", self.path.display(), msg.as_ref()),
+            None => format!("{}: {what}: {}", self.path.display(), msg.as_ref()),
+        };
         if !self.warnings.contains(&s) {
             self.warnings.push(s);
         }
@@ -384,8 +465,10 @@ pub fn load(path: &Path) -> Result<LoadedScene, Error> {
     let (doc, buffers, images) = gltf::import(path).map_err(|e| gltf_error(path, e))?;
     let scene =
         doc.default_scene().or_else(|| doc.scenes().next()).ok_or_else(|| Error::new(path, "the file has no scene"))?;
+    let lines = element_lines(json_text(&crate::read_file(path)?));
     let mut cx = Ctx {
         path,
+        lines,
         buffers: &buffers,
         images: &images,
         warnings: Vec::new(),
@@ -418,7 +501,8 @@ pub fn load(path: &Path) -> Result<LoadedScene, Error> {
                 | "KHR_materials_specular"
                 | "KHR_texture_transform"
         ) {
-            cx.warn("extensionsUsed", format!("extension {ext} is not supported"));
+            let at = doc.extensions_used().position(|e| e == ext).unwrap_or(0);
+            cx.warn(&format!("extensionsUsed[{at}]"), format!("extension {ext} is not supported"));
         }
     }
     for node in scene.nodes() {

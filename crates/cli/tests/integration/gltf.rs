@@ -135,7 +135,11 @@ fn materials_map_by_their_factors_and_extensions() {
     );
     assert!(matches!(m(4), Material::Diffuse { albedo: Texture::Constant(c) } if *c == Vec3::new(0.2, 0.4, 0.6)));
     assert_eq!(l.scene.objects[5].emission, Vec3::new(8.0, 4.0, 2.0));
-    assert!(l.warnings.iter().any(|w| w.contains("EXT_unknown")), "{:?}", l.warnings);
+    // Warnings name file, line and element.
+    let text = serde_json::to_string_pretty(&d).unwrap();
+    let line = text.lines().position(|t| t.contains("\"EXT_unknown\"")).unwrap() + 1;
+    let want = format!("s.gltf:{line}: extensionsUsed[5]: extension EXT_unknown");
+    assert!(l.warnings.iter().any(|w| w.contains(&want)), "{want}: {:?}", l.warnings);
 }
 
 #[test]
