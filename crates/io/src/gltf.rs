@@ -30,7 +30,7 @@ use std::sync::Arc;
 use glam::{Affine3A, Mat4, Vec2, Vec3};
 
 use snell_core::camera::{Camera, Projection};
-use snell_core::geometry::{Aabb, Transform};
+use snell_core::geometry::Aabb;
 use snell_core::image::srgb_decode;
 use snell_core::integrator::IntegratorKind;
 use snell_core::light::Light;
@@ -393,9 +393,7 @@ impl<'a> Ctx<'a> {
                         }
                     };
                     let Some(g) = g else { continue };
-                    let t = Transform::try_new(affine)
-                        .ok_or_else(|| Error::new(self.path, format!("{what}: the transform is not invertible")))?;
-                    (g, Some(t))
+                    (g, Some(affine))
                 } else {
                     let Some(mut m) = self.primitive_mesh(&p, &pwhat)? else { continue };
                     shapes::bake(&mut m, affine)
@@ -403,16 +401,11 @@ impl<'a> Ctx<'a> {
                     self.geometries.push(Geometry::Mesh(m));
                     (self.geometries.len() - 1, None)
                 };
-                let b = match &self.geometries[geometry] {
-                    Geometry::Mesh(m) => m.aabb(),
-                    Geometry::Sphere(s) => s.aabb(),
-                };
-                let b = match &transform {
-                    Some(t) => t.aabb(&b),
-                    None => b,
-                };
-                self.bounds = self.bounds.union(b);
-                self.objects.push(Object { geometry, transform, material, emission, light_samples: 1 });
+                let o = shapes::object(&self.geometries, geometry, None, transform, material, emission)
+                    .map_err(|e| Error::new(self.path, format!("{what}: {e}")))?;
+                let b = self.geometries[geometry].aabb();
+                self.bounds = self.bounds.union(o.transform.as_ref().map_or(b, |t| t.aabb(&b)));
+                self.objects.push(o);
             }
         }
         if let Some(c) = node.camera() {

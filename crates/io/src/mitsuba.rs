@@ -26,7 +26,6 @@ use quick_xml::reader::Reader;
 
 use snell_core::camera::{Camera, Projection};
 use snell_core::filter::Filter;
-use snell_core::geometry::Transform;
 use snell_core::integrator::IntegratorKind;
 use snell_core::light::{EnvMap, Environment, Light};
 use snell_core::material::microfacet::Distribution;
@@ -810,30 +809,9 @@ impl Ctx {
     }
 
     fn place(&mut self, s: &GroupShape, outer: Option<Affine3A>, at: &Node) -> Result<(), Error> {
-        let m = match (outer, s.transform) {
-            (Some(a), Some(b)) => Some(a * b),
-            (a, b) => a.or(b),
-        };
-        let transform = match m {
-            Some(m) => {
-                Some(Transform::try_new(m).ok_or_else(|| self.files.err(at, "the transform is not invertible"))?)
-            }
-            None => None,
-        };
-        if s.emission != Rgb::ZERO {
-            if let (Geometry::Sphere(_), Some(t)) = (&self.geometries[s.geometry], &transform) {
-                if t.uniform_scale().is_none() {
-                    return Err(self.files.err(at, "an emitting sphere may only be scaled uniformly"));
-                }
-            }
-        }
-        self.objects.push(Object {
-            geometry: s.geometry,
-            transform,
-            material: s.material,
-            emission: s.emission,
-            light_samples: 1,
-        });
+        let o = shapes::object(&self.geometries, s.geometry, outer, s.transform, s.material, s.emission)
+            .map_err(|e| self.files.err(at, e))?;
+        self.objects.push(o);
         Ok(())
     }
 
@@ -879,12 +857,7 @@ impl Ctx {
                     self.warn(e, "a second environment emitter is ignored");
                     return Ok(());
                 }
-                let rot = to_world.unwrap_or(Affine3A::IDENTITY).matrix3;
-                let to_world = Mat3::from_cols(
-                    Vec3::from(rot.x_axis).normalize_or_zero(),
-                    Vec3::from(rot.y_axis).normalize_or_zero(),
-                    Vec3::from(rot.z_axis).normalize_or_zero(),
-                );
+                let to_world = shapes::rotation(to_world.unwrap_or(Affine3A::IDENTITY));
                 let (scale, map) = if kind == "constant" {
                     (self.color(e, "radiance", Rgb::ONE)?, None)
                 } else {

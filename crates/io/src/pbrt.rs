@@ -31,7 +31,6 @@ use glam::{Affine3A, Mat3, Mat4, Vec2, Vec3, Vec4};
 
 use snell_core::camera::{Camera, Projection};
 use snell_core::filter::Filter;
-use snell_core::geometry::Transform;
 use snell_core::integrator::IntegratorKind;
 use snell_core::light::{EnvMap, Environment, Light};
 use snell_core::material::microfacet::Distribution;
@@ -859,31 +858,21 @@ impl Ctx {
     }
 
     fn place(&mut self, part: &Part, outer: Option<Affine3A>, emission: Rgb, at: At) -> Result<(), Error> {
-        let m = match (outer, part.transform) {
-            (Some(a), Some(b)) => Some(a * b),
-            (a, b) => a.or(b),
-        };
-        let transform = match m {
-            Some(m) => {
-                Some(Transform::try_new(m).ok_or_else(|| self.files.err(at, "the transform is not invertible"))?)
-            }
-            None => None,
-        };
-        if emission != Rgb::ZERO {
-            if let (Geometry::Sphere(_), Some(t)) = (&self.geometries[part.geometry], &transform) {
-                if t.uniform_scale().is_none() {
-                    return Err(self.files.err(at, "an emitting sphere may only be scaled uniformly"));
-                }
-            }
-        }
-        self.objects.push(Object {
-            geometry: part.geometry,
-            transform,
-            material: part.material,
-            emission,
-            light_samples: 1,
-        });
+        let o = shapes::object(&self.geometries, part.geometry, outer, part.transform, part.material, emission)
+            .map_err(|e| self.files.err(at, e))?;
+        self.objects.push(o);
         Ok(())
+    }
+
+    /// A light's `from` (object space) and its unit world direction towards `to`.
+    fn light_direction(&self, p: &Params, m: Affine3A, at: At) -> Result<(Vec3, Vec3), Error> {
+        let from = self.vec3(p, "from", Vec3::ZERO)?;
+        let to = self.vec3(p, "to", Vec3::Z)?;
+        let dir = m.transform_vector3(to - from);
+        if dir.length_squared() == 0.0 || !dir.is_finite() {
+            return Err(self.files.err(at, "the light's 'from' and 'to' coincide"));
+        }
+        Ok((from, dir.normalize()))
     }
 
     fn light(&mut self, ty: &str, p: &Params, at: At, s: &State) -> Result<(), Error> {
@@ -903,17 +892,12 @@ impl Ctx {
             }
             "spot" => {
                 let i = self.color(p, "I", emission)?.unwrap_or(Rgb::ONE) * scale;
-                let from = self.vec3(p, "from", Vec3::ZERO)?;
-                let to = self.vec3(p, "to", Vec3::Z)?;
-                let dir = m.transform_vector3(to - from);
-                if dir.length_squared() == 0.0 {
-                    return Err(self.files.err(at, "the spot light's 'from' and 'to' coincide"));
-                }
+                let (from, dir) = self.light_direction(p, m, at)?;
                 let cone = self.float(p, "coneangle", 30.0)?;
                 let delta = self.float(p, "conedelta", 5.0)?;
                 self.lights.push(Light::Spot {
                     position: m.transform_point3(from),
-                    direction: dir.normalize(),
+                    direction: dir,
                     intensity: i,
                     cos_inner: (cone - delta).max(0.0).to_radians().cos(),
                     cos_outer: cone.to_radians().cos(),
@@ -921,24 +905,15 @@ impl Ctx {
             }
             "distant" => {
                 let l = self.color(p, "L", emission)?.unwrap_or(Rgb::ONE) * scale;
-                let from = self.vec3(p, "from", Vec3::ZERO)?;
-                let to = self.vec3(p, "to", Vec3::Z)?;
-                let dir = m.transform_vector3(to - from);
-                if dir.length_squared() == 0.0 {
-                    return Err(self.files.err(at, "the distant light's 'from' and 'to' coincide"));
-                }
-                self.lights.push(Light::Directional { direction: dir.normalize(), irradiance: l });
+                let (_, dir) = self.light_direction(p, m, at)?;
+                self.lights.push(Light::Directional { direction: dir, irradiance: l });
             }
             "infinite" => {
                 if self.lights.iter().any(|l| matches!(l, Light::Environment(_))) {
                     self.warn(at, "a second infinite light is ignored");
                     return Ok(());
                 }
-                let to_world = Mat3::from_cols(
-                    Vec3::from(m.matrix3.x_axis).normalize_or_zero(),
-                    Vec3::from(m.matrix3.y_axis).normalize_or_zero(),
-                    Vec3::from(m.matrix3.z_axis).normalize_or_zero(),
-                );
+                let to_world = shapes::rotation(m);
                 p.get("portal");
                 let env = if let Some(f) = self.string(p, "filename")? {
                     let path = self.path(at, f);

@@ -1,4 +1,5 @@
-//! Tessellated shapes shared by the scene readers: disks, cylinders and bilinear patches.
+//! What the scene readers share about shapes: tessellated disks, cylinders and bilinear
+//! patches, baking a transform into a mesh, checked objects, and the rotation of a transform.
 
 use glam::{Vec2, Vec3};
 
@@ -127,4 +128,43 @@ pub(crate) fn bilinear(
     }
     out.uvs = Some(out_uvs);
     out
+}
+
+/// An object placing `geometry` by `outer · inner` (either may be absent), checked: the
+/// transform must be invertible, and an emitting sphere may only be scaled uniformly (its
+/// light is sampled as a sphere).
+pub(crate) fn object(
+    geometries: &[snell_core::scene::Geometry],
+    geometry: usize,
+    outer: Option<glam::Affine3A>,
+    inner: Option<glam::Affine3A>,
+    material: usize,
+    emission: snell_core::Rgb,
+) -> Result<snell_core::scene::Object, &'static str> {
+    use snell_core::geometry::Transform;
+    let m = match (outer, inner) {
+        (Some(a), Some(b)) => Some(a * b),
+        (a, b) => a.or(b),
+    };
+    let transform = match m {
+        Some(m) => Some(Transform::try_new(m).ok_or("the transform is not invertible")?),
+        None => None,
+    };
+    if emission != snell_core::Rgb::ZERO {
+        if let (Some(snell_core::scene::Geometry::Sphere(_)), Some(t)) = (geometries.get(geometry), &transform) {
+            if t.uniform_scale().is_none() {
+                return Err("an emitting sphere may only be scaled uniformly");
+            }
+        }
+    }
+    Ok(snell_core::scene::Object { geometry, transform, material, emission, light_samples: 1 })
+}
+
+/// The rotation part of `m` (its axes normalised), for environments, which turn but do not scale.
+pub(crate) fn rotation(m: glam::Affine3A) -> glam::Mat3 {
+    glam::Mat3::from_cols(
+        Vec3::from(m.matrix3.x_axis).normalize_or_zero(),
+        Vec3::from(m.matrix3.y_axis).normalize_or_zero(),
+        Vec3::from(m.matrix3.z_axis).normalize_or_zero(),
+    )
 }
