@@ -455,10 +455,29 @@ impl<'a> Ctx<'a> {
 
 /// Loads a glTF 2.0 scene (`.gltf` or `.glb`).
 pub fn load(path: &Path) -> Result<LoadedScene, Error> {
-    let (doc, buffers, images) = gltf::import(path).map_err(|e| gltf_error(path, e))?;
+    let bytes = crate::read_file(path)?;
+    // The gltf crate's validation indexes the accessors of a primitive's POSITION without a
+    // bounds check (gltf-json 1.4.1, mesh.rs): check those references first.
+    let unvalidated = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| gltf_error(path, e))?;
+    let root = unvalidated.document.as_json();
+    for (i, m) in root.meshes.iter().enumerate() {
+        for (j, p) in m.primitives.iter().enumerate() {
+            let refs = p.attributes.values().chain(p.indices.iter());
+            if let Some(bad) = refs.map(|a| a.value()).find(|&a| a >= root.accessors.len()) {
+                return Err(Error::new(
+                    path,
+                    format!("invalid glTF: meshes[{i}].primitives[{j}] refers to accessor {bad}, which does not exist"),
+                ));
+            }
+        }
+    }
+    // Anything else the crate cannot take is an error, not a crash.
+    let imported = std::panic::catch_unwind(|| gltf::import(path))
+        .map_err(|_| Error::new(path, "invalid glTF: the gltf crate could not read this file"))?;
+    let (doc, buffers, images) = imported.map_err(|e| gltf_error(path, e))?;
     let scene =
         doc.default_scene().or_else(|| doc.scenes().next()).ok_or_else(|| Error::new(path, "the file has no scene"))?;
-    let lines = element_lines(json_text(&crate::read_file(path)?));
+    let lines = element_lines(json_text(&bytes));
     let mut cx = Ctx {
         path,
         lines,

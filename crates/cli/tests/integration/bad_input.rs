@@ -221,3 +221,42 @@ fn bad_arrays() {
     let scene = b"[[shapes]]\ntype = \"sphere\"\narray = { count = [2, 2], step = [1, 0, 0] }\n";
     fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:"]);
 }
+
+/// Every prefix of the repository's pbrt and glTF Cornell boxes (cut every few bytes), and
+/// copies with bytes overwritten, load or fail with an error: never a panic.
+#[test]
+fn truncated_and_damaged_scene_files_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["cornell-box.pbrt", "cornell-box.gltf"] {
+        let bytes = std::fs::read(crate::common::repo_scene(name)).unwrap();
+        let p = dir.path().join(name);
+        let load = |b: &[u8]| {
+            std::fs::write(&p, b).unwrap();
+            let r = std::panic::catch_unwind(|| {
+                if name.ends_with(".pbrt") {
+                    snell_io::pbrt::load(&p).map(|_| ()).map_err(|e| e.to_string())
+                } else {
+                    snell_io::gltf::load(&p).map(|_| ()).map_err(|e| e.to_string())
+                }
+            });
+            match r {
+                Ok(Err(e)) => assert!(e.contains(name), "{e}"),
+                Ok(Ok(())) => {}
+                Err(_) => panic!("{name}: a damaged file made the reader panic"),
+            }
+        };
+        let step = (bytes.len() / 150).max(1);
+        for cut in (0..bytes.len()).step_by(step) {
+            load(&bytes[..cut]);
+        }
+        // Overwrite single bytes with characters that matter to the syntax.
+        let mut rng = snell_core::sampling::Pcg32::new(11, 12);
+        for _ in 0..150 {
+            let mut b = bytes.clone();
+            let at = (rng.next_f32() * b.len() as f32) as usize % b.len();
+            let chars = b"[]{}\":,-0e#x\n ";
+            b[at] = chars[(rng.next_f32() * chars.len() as f32) as usize % chars.len()];
+            load(&b);
+        }
+    }
+}

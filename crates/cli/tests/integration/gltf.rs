@@ -251,6 +251,10 @@ fn bad_files_are_errors_with_a_place() {
     d["meshes"][0]["primitives"][0]["attributes"] = json!({"POSITION": 0});
     d["bufferViews"][0]["byteLength"] = json!(24);
     assert!(load(&d).unwrap_err().contains("whole triangles"));
+    // A primitive whose POSITION names no accessor (the gltf crate's own check would panic).
+    let mut d = doc(json!({}));
+    d["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(9);
+    assert!(load(&d).unwrap_err().contains("accessor 9"));
     // A missing buffer file.
     let mut d = doc(json!({}));
     d["buffers"][0]["uri"] = json!("missing.bin");
