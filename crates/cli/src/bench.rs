@@ -89,6 +89,22 @@ fn count_closest<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
     rays.par_chunks(1024).map(|c| c.iter().filter(|r| w.hit(r, f32::INFINITY).is_some()).count()).sum()
 }
 
+/// [`count_closest`] with the rays traced in packets of eight consecutive ones (the rest one
+/// by one).
+fn count_closest_packets<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
+    rays.par_chunks(1024)
+        .map(|c| {
+            let mut packets = c.chunks_exact(8);
+            let mut n = 0;
+            for p in packets.by_ref() {
+                let p: &[Ray; 8] = p.try_into().expect("chunks of eight");
+                n += w.hit_packet8(p).iter().filter(|h| h.is_some()).count();
+            }
+            n + packets.remainder().iter().filter(|r| w.hit(r, f32::INFINITY).is_some()).count()
+        })
+        .sum()
+}
+
 /// Mean traversal work per ray, counted in an untimed pass (closest hit for every workload).
 fn work_per_ray<A: Accel>(w: &World<A>, rays: &[Ray]) -> (f64, f64) {
     let (n, p) = rays
@@ -136,10 +152,10 @@ fn measure<A: Accel>(
         .map(|(name, rays)| {
             let rays = subset(rays, kind, w.scene.triangle_count());
             let (nodes_per_ray, prims_per_ray) = work_per_ray(w, &rays);
-            let (hits, secs) = if *name == "bounce-occluded" {
-                timed(reps, || count_occluded(w, &rays))
-            } else {
-                timed(reps, || count_closest(w, &rays))
+            let (hits, secs) = match *name {
+                "bounce-occluded" => timed(reps, || count_occluded(w, &rays)),
+                "primary-packets" => timed(reps, || count_closest_packets(w, &rays)),
+                _ => timed(reps, || count_closest(w, &rays)),
             };
             Row {
                 accel: kind,
@@ -184,7 +200,12 @@ fn workload(mesh: &Mesh, scene: &Scene, args: &BenchArgs) -> Result<Vec<(&'stati
             (primary, bounce)
         }
     };
-    Ok(vec![("primary", primary), ("bounce", bounce.clone()), ("bounce-occluded", bounce)])
+    Ok(vec![
+        ("primary", primary.clone()),
+        ("primary-packets", primary),
+        ("bounce", bounce.clone()),
+        ("bounce-occluded", bounce),
+    ])
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {

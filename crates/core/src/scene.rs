@@ -533,6 +533,38 @@ impl<'s, A: Accel> World<'s, A> {
         Some(RawHit { t, object, prim, b1, b2 })
     }
 
+    /// Closest hits of eight rays traced as a packet (coherent rays such as camera rays):
+    /// the same hits as [`World::hit`] gives each ray. Packets pay for a single untransformed
+    /// mesh, whose leaves are blocks of four triangles; other scenes trace the rays one by one.
+    pub fn hit_packet8(&self, rays: &[Ray; 8]) -> [Option<RawHit>; 8] {
+        let single = match self.scene.objects.as_slice() {
+            [o] if o.transform.is_none() => Some(o.geometry),
+            _ => None,
+        };
+        let (Some(g), Some(accel)) = (single, single.and_then(|g| self.blas[g].as_ref())) else {
+            return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
+        };
+        let TriData::Leaves { blocks, ranges } = &self.tris[g] else {
+            return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
+        };
+        let r4: [Ray4; 8] = std::array::from_fn(|i| Ray4::new(WatertightRay::new(rays[i].o, rays[i].d)));
+        let mut t = [f32::INFINITY; 8];
+        let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
+        accel.closest_leaf_packet8(rays, 0xff, &mut t, |leaf, lane, mut tm| {
+            let (a, b) = ranges[leaf as usize];
+            let mut found = None;
+            for block in &blocks[a as usize..b as usize] {
+                if let Some((tri, h)) = block.closest(&r4[lane], tm) {
+                    tm = h.t;
+                    found = Some(h.t);
+                    rec[lane] = Some((tri, h));
+                }
+            }
+            found
+        });
+        std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: 0, prim, b1: h.b1, b2: h.b2 }))
+    }
+
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         let test = |obj: u32, tmax: f32| {

@@ -804,8 +804,158 @@ impl Bvh {
     }
 }
 
+/// Packet traversal: eight rays against a node's four boxes at once in AVX2 lanes, the node
+/// fetched once for all of them.
+#[cfg(target_arch = "x86_64")]
+mod packet {
+    use super::{Bvh, EMPTY, LEAF, MAX_STACK};
+    use crate::geometry::Ray;
+    use std::arch::x86_64::*;
+
+    /// The eight rays in structure-of-arrays form.
+    struct Rays8 {
+        o: [__m256; 3],
+        inv: [__m256; 3],
+        /// Per axis, lanes whose direction is negative (the near plane is the max).
+        neg: [__m256; 3],
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn load(rays: &[Ray; 8]) -> Rays8 {
+        let lane = |f: &dyn Fn(&Ray) -> f32| {
+            let v: [f32; 8] = std::array::from_fn(|i| f(&rays[i]));
+            // SAFETY: an unaligned load of a local array of eight floats.
+            unsafe { _mm256_loadu_ps(v.as_ptr()) }
+        };
+        let inv = [lane(&|r| 1.0 / r.d.x), lane(&|r| 1.0 / r.d.y), lane(&|r| 1.0 / r.d.z)];
+        let zero = _mm256_setzero_ps();
+        Rays8 {
+            o: [lane(&|r| r.o.x), lane(&|r| r.o.y), lane(&|r| r.o.z)],
+            neg: [
+                _mm256_cmp_ps::<_CMP_LT_OQ>(inv[0], zero),
+                _mm256_cmp_ps::<_CMP_LT_OQ>(inv[1], zero),
+                _mm256_cmp_ps::<_CMP_LT_OQ>(inv[2], zero),
+            ],
+            inv,
+        }
+    }
+
+    /// The lanes of `r` whose ray meets child `j` of `bounds` within `[0, t_max]`, with their
+    /// entry distances; the single-ray test's arithmetic (near plane by the direction's sign,
+    /// NaN ignored, exit rounded up).
+    #[target_feature(enable = "avx2")]
+    fn slab8(bounds: &[[f32; 4]; 6], j: usize, r: &Rays8, t_max: __m256) -> (__m256, u32) {
+        let mut tn = _mm256_setzero_ps();
+        let mut tf = t_max;
+        for a in 0..3 {
+            let lo = _mm256_set1_ps(bounds[a][j]);
+            let hi = _mm256_set1_ps(bounds[3 + a][j]);
+            let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, r.o[a]), r.inv[a]);
+            let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, r.o[a]), r.inv[a]);
+            let near = _mm256_blendv_ps(t0, t1, r.neg[a]);
+            let far = _mm256_blendv_ps(t1, t0, r.neg[a]);
+            tn = _mm256_max_ps(near, tn);
+            tf = _mm256_min_ps(far, tf);
+        }
+        let tf = _mm256_mul_ps(tf, _mm256_set1_ps(1.0 + 4.0 * f32::EPSILON));
+        (tn, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32)
+    }
+
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest8(
+        bvh: &Bvh,
+        rays: &[Ray; 8],
+        active: u8,
+        t_max: &mut [f32; 8],
+        test: &mut impl FnMut(u32, usize, f32) -> Option<f32>,
+    ) -> u8 {
+        let mut hits = 0u8;
+        let mut leaf = |leaf: u32, mask: u32, t_max: &mut [f32; 8], hits: &mut u8| {
+            let mut m = mask;
+            while m != 0 {
+                let lane = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if let Some(t) = test(leaf, lane, t_max[lane]) {
+                    t_max[lane] = t;
+                    *hits |= 1 << lane;
+                }
+            }
+        };
+        if bvh.root_leaf {
+            leaf(0, active as u32, t_max, &mut hits);
+            return hits;
+        }
+        if bvh.nodes.is_empty() {
+            return 0;
+        }
+        let r = load(rays);
+        let mut stack = [(0u32, 0u32); 3 * MAX_STACK];
+        stack[0] = (0, active as u32);
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let (cur, mask) = stack[sp];
+            if cur & LEAF != 0 {
+                leaf(cur & !LEAF, mask, t_max, &mut hits);
+                continue;
+            }
+            let n = &bvh.nodes[cur as usize];
+            // SAFETY: an unaligned load of the eight bounds.
+            let tm = unsafe { _mm256_loadu_ps(t_max.as_ptr()) };
+            // Children hit by any lane still active, ordered far to near by the entry distance
+            // of their first lane, so that the nearest is popped first.
+            let mut kids = [(0u32, 0u32, 0.0f32); 4];
+            let mut k = 0;
+            for j in 0..4 {
+                let c = n.child[j];
+                if c == EMPTY {
+                    continue;
+                }
+                let (tn, hit) = slab8(&n.bounds, j, &r, tm);
+                let m = hit & mask;
+                if m == 0 {
+                    continue;
+                }
+                let mut t = [0.0f32; 8];
+                // SAFETY: an unaligned store into a local array of eight floats.
+                unsafe { _mm256_storeu_ps(t.as_mut_ptr(), tn) };
+                let d = t[m.trailing_zeros() as usize];
+                let mut p = k;
+                while p > 0 && kids[p - 1].2 < d {
+                    kids[p] = kids[p - 1];
+                    p -= 1;
+                }
+                kids[p] = (c, m, d);
+                k += 1;
+            }
+            for &(c, m, _) in &kids[..k] {
+                stack[sp] = (c, m);
+                sp += 1;
+            }
+        }
+        hits
+    }
+}
+
 impl Accel for Bvh {
     type Params = BvhParams;
+
+    fn closest_leaf_packet8(
+        &self,
+        rays: &[Ray; 8],
+        active: u8,
+        t_max: &mut [f32; 8],
+        mut test: impl FnMut(u32, usize, f32) -> Option<f32>,
+    ) -> u8 {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 was detected on this CPU.
+            return unsafe { packet::closest8(self, rays, active, t_max, &mut test) };
+        }
+        super::lane_by_lane(self, rays, active, t_max, test)
+    }
 
     fn build(boxes: &[Aabb], params: &BvhParams) -> Self {
         Self::build_clipped(boxes, params, &super::clip_box)

@@ -102,11 +102,44 @@ pub trait Accel: Send + Sync + Sized {
         self.any_counted(ray, t_max, test, counter)
     }
 
+    /// Closest hits of a packet of up to eight rays traced together (for coherent rays such
+    /// as camera rays): `active` selects the lanes, `t_max` is each lane's bound (updated),
+    /// and `test(leaf, lane, t_max)` tests one lane's ray against a leaf. Returns the mask of
+    /// lanes that hit. The default traces the lanes one by one.
+    fn closest_leaf_packet8(
+        &self,
+        rays: &[Ray; 8],
+        active: u8,
+        t_max: &mut [f32; 8],
+        test: impl FnMut(u32, usize, f32) -> Option<f32>,
+    ) -> u8 {
+        lane_by_lane(self, rays, active, t_max, test)
+    }
+
     /// Size and shape of the structure.
     fn stats(&self) -> AccelStats;
 
     /// The boxes of the structure's nodes at `depth` (0 = the root), for pictures of it.
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb>;
+}
+
+/// [`Accel::closest_leaf_packet8`] one lane at a time.
+pub(crate) fn lane_by_lane<A: Accel>(
+    accel: &A,
+    rays: &[Ray; 8],
+    active: u8,
+    t_max: &mut [f32; 8],
+    mut test: impl FnMut(u32, usize, f32) -> Option<f32>,
+) -> u8 {
+    let mut hits = 0;
+    for (lane, ray) in rays.iter().enumerate() {
+        if active & (1 << lane) != 0
+            && accel.closest_leaf_counted(ray, &mut t_max[lane], |leaf, tm| test(leaf, lane, tm), &NoCount)
+        {
+            hits |= 1 << lane;
+        }
+    }
+    hits
 }
 
 /// Closest and any hit over leaves that a traversal visits front to back and that do not
