@@ -33,7 +33,7 @@ fn json_lines_for_every_accelerator_and_workload() {
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<&str> = out.lines().collect();
-    assert_eq!(lines.len(), 3 * snell_core::accel::AccelKind::ALL.len(), "{out}");
+    assert_eq!(lines.len(), 4 * snell_core::accel::AccelKind::ALL.len(), "{out}");
     for l in &lines {
         for key in [
             "mesh",
@@ -57,13 +57,15 @@ fn json_lines_for_every_accelerator_and_workload() {
         assert_eq!(field(l, "threads"), "2");
     }
     // Every accelerator finds the same hits (brute traces all rays here: fewer than 2048 hit).
-    for workload in ["primary", "bounce", "bounce-occluded"] {
+    for workload in ["primary", "primary-packets", "bounce", "bounce-occluded"] {
         let hits: Vec<&str> =
             lines.iter().filter(|l| field(l, "workload") == workload).map(|l| field(l, "hits")).collect();
         assert!(hits.windows(2).all(|w| w[0] == w[1]), "{workload}: {hits:?}");
     }
+    // Packets find what single rays find.
+    assert_eq!(field(lines[0], "hits"), field(lines[1], "hits"));
     let primary_hits: usize = field(lines[0], "hits").parse().unwrap();
-    let bounce_hits: usize = field(lines[1], "hits").parse().unwrap();
+    let bounce_hits: usize = field(lines[2], "hits").parse().unwrap();
     assert!(primary_hits > 100 && bounce_hits > 5, "{primary_hits} {bounce_hits}");
 }
 
@@ -96,6 +98,8 @@ fn bunny_primary_hits_match_embree() {
     // ../shared/bench/README.md: Embree hits 448,052 of the 1,048,576 primary rays.
     let hits: i64 = field(primary, "hits").parse().unwrap();
     assert!((hits - 448_052).abs() <= 45, "{hits} primary hits; Embree has 448052 (0.01 % = 45)");
+    let packets = out.lines().find(|l| field(l, "workload") == "primary-packets").unwrap();
+    assert_eq!(field(packets, "hits"), field(primary, "hits"), "packets and single rays");
     let bounce = out.lines().find(|l| field(l, "workload") == "bounce").unwrap();
     let hits: i64 = field(bounce, "hits").parse().unwrap();
     // The bounce rays are regenerated from our own hit points (not replayed), so they differ from
