@@ -176,6 +176,23 @@ pub enum AreaShape {
 /// loses its precision to cancellation, and the two densities agree anyway (pbrt-v4's bound).
 const MIN_SPHERICAL_RECTANGLE: f64 = 3e-4;
 
+/// Solid-angle sampling of a rectangle costs several times area sampling (four arc cosines
+/// and a sine and cosine per sample); it pays only where the rectangle looks large, which is
+/// judged by `area / distance²` to its centre, an upper bound of the solid angle (sr) that
+/// costs nothing to compute.
+const SPHERICAL_RECTANGLE_PAYS: f32 = 0.2;
+
+/// The spherical rectangle of `corner + [0,1]·ex + [0,1]·ey` seen from `p`, if solid-angle
+/// sampling pays there (see [`SPHERICAL_RECTANGLE_PAYS`]).
+fn spherical_rectangle(p: Vec3, corner: Vec3, ex: Vec3, ey: Vec3) -> Option<SphericalRectangle> {
+    let centre = corner + 0.5 * (ex + ey);
+    let area = ex.length() * ey.length();
+    if area < SPHERICAL_RECTANGLE_PAYS * (centre - p).length_squared() {
+        return None;
+    }
+    SphericalRectangle::new(p, corner, ex, ey).filter(|r| r.solid_angle >= MIN_SPHERICAL_RECTANGLE)
+}
+
 /// A rectangle as seen from a point: Ureña, Fajardo and King, "An Area-Preserving
 /// Parametrization for Spherical Rectangles" (EGSR 2013). Built in double precision, as the
 /// solid angle is a small difference of angles near 2π.
@@ -350,8 +367,7 @@ impl Light {
                 if (p - *corner).dot(*normal) <= 0.0 || cos_l.is_nan() || cos_l <= 0.0 {
                     return 0.0;
                 }
-                match SphericalRectangle::new(p, *corner, *ex, *ey).filter(|r| r.solid_angle >= MIN_SPHERICAL_RECTANGLE)
-                {
+                match spherical_rectangle(p, *corner, *ex, *ey) {
                     Some(r) => (1.0 / r.solid_angle) as f32,
                     None => dist2 / (cos_l * a.area()),
                 }
@@ -432,8 +448,7 @@ impl AreaLight {
                 if (p - *corner).dot(*normal) <= 0.0 {
                     return None; // Behind a one-sided emitter.
                 }
-                match SphericalRectangle::new(p, *corner, *ex, *ey).filter(|r| r.solid_angle >= MIN_SPHERICAL_RECTANGLE)
-                {
+                match spherical_rectangle(p, *corner, *ex, *ey) {
                     Some(r) => {
                         let q = r.sample(u);
                         let wi = (q - p).normalize_or_zero();
@@ -581,6 +596,13 @@ mod tests {
         let behind = Vec3::new(1.0, 1.0, 2.0);
         assert!(l.sample(behind, Vec2::splat(0.5)).is_none());
         assert_eq!(l.pdf(behind, Vec3::new(1.0, 1.0, 1.0), -Vec3::Z), 0.0);
+        // Where it looks small (area / distance² below 0.2), sampled by area: the density is
+        // distance² / (cos · area).
+        let small = rectangle(Vec3::new(-0.5, -0.5, 3.0), Vec3::new(0.0, 1.0, 0.0), Vec3::new(1.0, 0.0, 0.0));
+        let s = small.sample(Vec3::ZERO, Vec2::new(0.3, 0.8)).unwrap();
+        let area_pdf = s.p.length_squared() / (s.wi.z * 1.0);
+        assert!((s.pdf - area_pdf).abs() < 1e-5 * area_pdf, "{} vs {area_pdf}", s.pdf);
+        assert!((small.pdf(Vec3::ZERO, s.p, s.n) - area_pdf).abs() < 1e-5 * area_pdf);
         // Far away, where the solid angle is tiny, it falls back to area sampling (same answer).
         let far = rectangle(Vec3::new(-0.05, -0.05, 20.0), Vec3::new(0.0, 0.1, 0.0), Vec3::new(0.1, 0.0, 0.0));
         let e = irradiance(&far, 10_000);
