@@ -1165,7 +1165,7 @@ pub fn load(path: &Path) -> Result<LoadedScene, Error> {
                 cx.coordinate_systems.insert("world".into(), Mat4::IDENTITY);
             }
             "WorldEnd" => {}
-            "OptionBegin" | "Option" => {
+            "Option" => {
                 let p = params(&cx, &mut stream)?;
                 cx.unused("Option", &p);
             }
