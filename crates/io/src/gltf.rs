@@ -471,9 +471,17 @@ pub fn load(path: &Path) -> Result<LoadedScene, Error> {
             }
         }
     }
-    // Anything else the crate cannot take is an error, not a crash.
-    let imported = std::panic::catch_unwind(|| gltf::import(path))
-        .map_err(|_| Error::new(path, "invalid glTF: the gltf crate could not read this file"))?;
+    // Validate the same parse, then load its buffers and images (external files relative to
+    // this one). Anything else the crate cannot take is an error, not a crash.
+    let gltf::Gltf { document, blob } = unvalidated;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let imported = std::panic::catch_unwind(move || {
+        let doc = gltf::Document::from_json(document.into_json())?;
+        let buffers = gltf::import_buffers(&doc, Some(base), blob)?;
+        let images = gltf::import_images(&doc, Some(base), &buffers)?;
+        Ok::<_, gltf::Error>((doc, buffers, images))
+    })
+    .map_err(|_| Error::new(path, "invalid glTF: the gltf crate could not read this file"))?;
     let (doc, buffers, images) = imported.map_err(|e| gltf_error(path, e))?;
     let scene =
         doc.default_scene().or_else(|| doc.scenes().next()).ok_or_else(|| Error::new(path, "the file has no scene"))?;
