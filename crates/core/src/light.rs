@@ -184,9 +184,8 @@ const SPHERICAL_RECTANGLE_PAYS: f32 = 0.2;
 
 /// The spherical rectangle of `corner + [0,1]·ex + [0,1]·ey` seen from `p`, if solid-angle
 /// sampling pays there (see [`SPHERICAL_RECTANGLE_PAYS`]).
-fn spherical_rectangle(p: Vec3, corner: Vec3, ex: Vec3, ey: Vec3) -> Option<SphericalRectangle> {
+fn spherical_rectangle(p: Vec3, corner: Vec3, ex: Vec3, ey: Vec3, area: f32) -> Option<SphericalRectangle> {
     let centre = corner + 0.5 * (ex + ey);
-    let area = ex.length() * ey.length();
     if area < SPHERICAL_RECTANGLE_PAYS * (centre - p).length_squared() {
         return None;
     }
@@ -367,9 +366,10 @@ impl Light {
                 if (p - *corner).dot(*normal) <= 0.0 || cos_l.is_nan() || cos_l <= 0.0 {
                     return 0.0;
                 }
-                match spherical_rectangle(p, *corner, *ex, *ey) {
+                let area = a.area();
+                match spherical_rectangle(p, *corner, *ex, *ey, area) {
                     Some(r) => (1.0 / r.solid_angle) as f32,
-                    None => dist2 / (cos_l * a.area()),
+                    None => dist2 / (cos_l * area),
                 }
             }
             AreaShape::Triangles { cdf, .. } => {
@@ -448,7 +448,8 @@ impl AreaLight {
                 if (p - *corner).dot(*normal) <= 0.0 {
                     return None; // Behind a one-sided emitter.
                 }
-                match spherical_rectangle(p, *corner, *ex, *ey) {
+                let area = self.area();
+                match spherical_rectangle(p, *corner, *ex, *ey, area) {
                     Some(r) => {
                         let q = r.sample(u);
                         let wi = (q - p).normalize_or_zero();
@@ -467,7 +468,7 @@ impl AreaLight {
                         if !(cos_l > 0.0 && dist2 > 0.0) {
                             return None;
                         }
-                        let pdf = dist2 / (cos_l * self.area());
+                        let pdf = dist2 / (cos_l * area);
                         Some(LightSample { wi, p: q, n: *normal, infinite: false, value: self.emission / pdf, pdf })
                     }
                 }
