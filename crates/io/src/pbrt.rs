@@ -283,7 +283,7 @@ struct Ctx {
     filter: Option<(String, Params, At)>,
 }
 
-const DIRECTIVES_WITH_PARAMS: [&str; 12] = [
+const DIRECTIVES_WITH_PARAMS: [&str; 11] = [
     "Camera",
     "Film",
     "Sampler",
@@ -294,7 +294,6 @@ const DIRECTIVES_WITH_PARAMS: [&str; 12] = [
     "Material",
     "LightSource",
     "AreaLightSource",
-    "MakeNamedMedium",
     "ColorSpace",
 ];
 
@@ -1259,7 +1258,6 @@ pub fn load(path: &Path) -> Result<LoadedScene, Error> {
                     "ColorSpace" if ty != "srgb" => {
                         cx.warn(at, format!("color space '{ty}' is ignored: colours are taken as linear sRGB"));
                     }
-                    "MakeNamedMedium" => {}
                     "Material" => {
                         p.defaults = state.attributes.get("material").cloned().unwrap_or_default();
                         state.material = cx.material(&ty, &p, at)?;
