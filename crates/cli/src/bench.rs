@@ -144,10 +144,10 @@ fn measure<A: Accel>(
     work: &[(&'static str, Vec<Ray>)],
     reps: u32,
 ) -> Vec<Row> {
-    let (top, blas) = w.structures();
+    let (_, blas) = w.structures();
     let stats = blas.first().and_then(|b| b.as_ref()).map(|b| b.stats()).unwrap_or_default();
     // Like Embree's figure: the structures and the triangle data their leaves point to.
-    let bytes = stats.bytes + top.stats().bytes + w.triangle_bytes();
+    let bytes = w.bytes();
     work.iter()
         .map(|(name, rays)| {
             let rays = subset(rays, kind, w.scene.triangle_count());

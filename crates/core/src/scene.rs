@@ -398,6 +398,7 @@ impl<'s, A: Accel> World<'s, A> {
         let mut top_params = *params;
         top_params.base_mut().max_leaf_prims = 1;
         top_params.base_mut().sah_leaf_max = 1;
+        top_params.base_mut().leaf_block = 1;
         let top = A::build(&boxes, &top_params);
         let mut lights = scene.lights.clone();
         let mut object_light = vec![u32::MAX; scene.objects.len()];
@@ -476,6 +477,18 @@ impl<'s, A: Accel> World<'s, A> {
                 TriData::Single(t) => t.len() * std::mem::size_of::<[Vec3; 3]>(),
             })
             .sum()
+    }
+
+    /// Blocks of four triangles in the leaves (0 for structures that test triangles singly).
+    pub fn triangle_blocks(&self) -> usize {
+        self.tris.iter().map(|t| if let TriData::Leaves { blocks, .. } = t { blocks.len() } else { 0 }).sum()
+    }
+
+    /// Bytes of all the structures and the triangle data their leaves hold (what Embree reports
+    /// as the size of its BVH).
+    pub fn bytes(&self) -> usize {
+        let bottoms: usize = self.blas.iter().flatten().map(|b| b.stats().bytes).sum();
+        self.top.stats().bytes + bottoms + self.triangle_bytes()
     }
 
     /// The top-level structure and the bottom-level one of each geometry (None for spheres).

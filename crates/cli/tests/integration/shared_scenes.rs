@@ -77,6 +77,9 @@ fn bvh_matches_brute_force_on_the_bunny() {
         }
     }
     assert!(hits > 40, "{hits}");
+    // The default accelerator's memory target (Embree: 66-72 bytes per triangle).
+    let per_tri = bvh.bytes() as f64 / scene.triangle_count() as f64;
+    assert!(per_tri <= 64.0, "{per_tri:.1} bytes per triangle");
 }
 
 #[test]

@@ -5,7 +5,8 @@
 //! sibling boxes may overlap, which is what makes a BVH a BVH rather than a k-d tree).
 //! Recursion stops at `max_leaf_prims` primitives or at depth `max_depth` (24 by default); the
 //! SAH split also stops at up to `sah_leaf_max` (8) primitives where a leaf is cheaper than any
-//! split (leaf triangles are tested four at a time, see [`crate::shape::Tri4`]).
+//! split. Leaf triangles are tested four at a time (see [`crate::shape::Tri4`]), so the SAH counts
+//! a leaf's cost in blocks of four (`leaf_block`), which keeps the blocks full.
 //!
 //! Build layout ≠ traversal layout (as in tinybvh): the builder makes a binary tree of 32-byte
 //! nodes, which is then collapsed into a 4-wide tree whose nodes hold the boxes of their four
@@ -117,7 +118,7 @@ impl SpatialBuilder<'_> {
                 bb.grow_box(k, r.b);
                 bn[k] += 1;
             }
-            if let Some((cost, k, lb, rb)) = sah_sweep(&bb, &bn, &bn) {
+            if let Some((cost, k, lb, rb)) = sah_sweep(&bb, &bn, &bn, self.params.leaf_block) {
                 if cost < best_o.0 {
                     best_o = (cost, axis, k, lb, rb);
                 }
@@ -151,7 +152,7 @@ impl SpatialBuilder<'_> {
                     }
                     bb.grow_box(b1, part);
                 }
-                if let Some((cost, k, _, _)) = sah_sweep(&bb, &enter, &exit) {
+                if let Some((cost, k, _, _)) = sah_sweep(&bb, &enter, &exit, self.params.leaf_block) {
                     if cost < best_s.0 {
                         best_s = (cost, axis, lo + k as f32 * w);
                     }
@@ -436,7 +437,7 @@ impl Builder {
             if ext[axis] <= 0.0 {
                 continue;
             }
-            if let Some((cost, k, _, _)) = sah_sweep(&bins[axis], &bin_n[axis], &bin_n[axis]) {
+            if let Some((cost, k, _, _)) = sah_sweep(&bins[axis], &bin_n[axis], &bin_n[axis], self.params.leaf_block) {
                 if cost < best.0 {
                     best = (cost, axis, k);
                 }
@@ -448,12 +449,11 @@ impl Builder {
         }
         let (cost, axis, split_bin) = best;
         // SAH termination for small nodes: a leaf when testing its primitives costs less than
-        // a split (traversal step plus the children's expected tests). Leaf triangles are
-        // tested four at a time, so a leaf costs one test per block of four.
+        // a split (traversal step plus the children's expected tests), both counted in blocks.
         if n <= self.params.sah_leaf_max {
             let (ct, ci) = (self.params.traversal_cost, self.params.intersect_cost);
             let area = bounds.half_area();
-            if ci * n.div_ceil(4) as f32 * area <= ct * area + ci * cost / 4.0 {
+            if ci * n.div_ceil(self.params.leaf_block.max(1)) as f32 * area <= ct * area + ci * cost {
                 return 0;
             }
         }
@@ -536,13 +536,16 @@ fn half_area(lo: Vec3A, hi: Vec3A) -> f32 {
 /// bin on its right. Each bin has the box of what lies in it, the number of references that
 /// start in it (`starts`, counted on the left of planes after it) and that end in it (`ends`,
 /// counted on the right of planes before it); for object splits both are the bin counts.
-/// Returns `(cost, k, left box, right box)` with cost `A(L)·nL + A(R)·nR` (half areas), or
-/// `None` if no plane has references on both sides.
+/// Returns `(cost, k, left box, right box)` with cost `A(L)·⌈nL/block⌉ + A(R)·⌈nR/block⌉` (half
+/// areas; leaves test `block` primitives at a time), or `None` if no plane has references on
+/// both sides.
 fn sah_sweep<const N: usize>(
     bins: &Bins<N>,
     starts: &[usize; N],
     ends: &[usize; N],
+    block: usize,
 ) -> Option<(f32, usize, Aabb, Aabb)> {
+    let block = block.max(1);
     // Right-hand sides as areas and counts only; the winning split's boxes are rebuilt once.
     let mut right_area = [0.0f32; N];
     let mut right_n = [0usize; N];
@@ -564,7 +567,7 @@ fn sah_sweep<const N: usize>(
         if cnt == 0 || rn == 0 {
             continue;
         }
-        let cost = half_area(lo, hi) * cnt as f32 + right_area[k + 1] * rn as f32;
+        let cost = half_area(lo, hi) * cnt.div_ceil(block) as f32 + right_area[k + 1] * rn.div_ceil(block) as f32;
         if best.is_none_or(|b| cost < b.0) {
             best = Some((cost, k + 1));
         }
