@@ -41,6 +41,16 @@ pub struct Object {
     pub light_samples: u32,
 }
 
+impl Object {
+    /// World-space box of this object given its geometry's box `b`.
+    pub fn place_aabb(&self, b: Aabb) -> Aabb {
+        match &self.transform {
+            Some(t) => t.aabb(&b),
+            None => b,
+        }
+    }
+}
+
 /// Everything that is rendered.
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -97,11 +107,7 @@ impl Scene {
     /// World-space box of an object: for a transformed object, the box of the 8 transformed
     /// corners of its geometry's box.
     pub fn object_aabb(&self, o: &Object) -> Aabb {
-        let b = self.geometries[o.geometry].aabb();
-        match &o.transform {
-            Some(t) => t.aabb(&b),
-            None => b,
-        }
+        o.place_aabb(self.geometries[o.geometry].aabb())
     }
 
     /// Total triangle count as rendered (instances counted once per instance).
@@ -374,7 +380,7 @@ impl<'s, A: Accel> World<'s, A> {
             .par_iter()
             .map(|g| match g {
                 Geometry::Mesh(m) => {
-                    let boxes: Vec<Aabb> = (0..m.indices.len()).map(|i| m.triangle_aabb(i)).collect();
+                    let boxes: Vec<Aabb> = (0..m.indices.len()).into_par_iter().map(|i| m.triangle_aabb(i)).collect();
                     let clip = |prim: u32, part: &Aabb, axis: usize, pos: f32| {
                         clip_triangle(m.triangle(prim as usize), part, axis, pos)
                     };
@@ -392,7 +398,9 @@ impl<'s, A: Accel> World<'s, A> {
                 _ => TriData::Single(Vec::new()),
             })
             .collect();
-        let boxes: Vec<Aabb> = scene.objects.iter().map(|o| scene.object_aabb(o)).collect();
+        // Each geometry's box once (a pass over its vertices), then each object's from it.
+        let geometry_boxes: Vec<Aabb> = scene.geometries.par_iter().map(|g| g.aabb()).collect();
+        let boxes: Vec<Aabb> = scene.objects.iter().map(|o| o.place_aabb(geometry_boxes[o.geometry])).collect();
         // One object per top-level leaf: each object's box is tested before its own structure
         // is entered (objects are few; a wasted bottom-level entry costs far more).
         let mut top_params = *params;
@@ -408,7 +416,7 @@ impl<'s, A: Accel> World<'s, A> {
                 lights.push(Light::Area(scene.area_light(i, o)));
             }
         }
-        let radius = 0.5 * scene.aabb().extent().length();
+        let radius = 0.5 * boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b)).extent().length();
         let radius = if radius.is_finite() { radius } else { 1.0 };
         let light_cdf = crate::sampling::build_cdf(lights.iter().map(|l| {
             let p = match scene.light_selection {
