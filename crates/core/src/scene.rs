@@ -260,20 +260,21 @@ impl TriData {
                 r
             })
             .collect();
-        // Each leaf fills its own slice of the blocks, in parallel.
-        let mut blocks = vec![Tri4::pack([]); start as usize];
-        let mut slices = Vec::with_capacity(leaves.len());
-        let mut rest = blocks.as_mut_slice();
-        for prims in &leaves {
-            let (mine, tail) = rest.split_at_mut(prims.len().div_ceil(4));
-            slices.push(mine);
-            rest = tail;
-        }
-        slices.into_par_iter().zip(leaves.par_iter()).for_each(|(out, prims)| {
-            for (b, c) in out.iter_mut().zip(prims.chunks(4)) {
-                *b = Tri4::pack(c.iter().map(|&p| (p, m.triangle(p as usize))));
-            }
-        });
+        // Per block, its leaf and first triangle there; then every block is packed in parallel
+        // straight into place (an indexed parallel collect; nothing is initialised twice).
+        let firsts: Vec<(u32, u32)> = leaves
+            .iter()
+            .enumerate()
+            .flat_map(|(l, prims)| (0..prims.len()).step_by(4).map(move |f| (l as u32, f as u32)))
+            .collect();
+        let blocks = firsts
+            .into_par_iter()
+            .map(|(l, f)| {
+                let prims = leaves[l as usize];
+                let c = &prims[f as usize..(f as usize + 4).min(prims.len())];
+                Tri4::pack(c.iter().map(|&p| (p, m.triangle(p as usize))))
+            })
+            .collect();
         TriData::Leaves { blocks, ranges }
     }
 
