@@ -293,8 +293,8 @@ pub struct AccelParams {
     /// SAH cost of one primitive test.
     pub intersect_cost: f32,
     /// The SAH BVH may also make a leaf of up to this many primitives where that is cheaper
-    /// than any split, costing leaf triangles in blocks of four (they are tested four at a
-    /// time). 8 by default; at most `max_leaf_prims` turns this off.
+    /// than any split (both costed in blocks of `leaf_block`). 8 by default; at most
+    /// `max_leaf_prims` turns this off.
     pub sah_leaf_max: usize,
     /// Leaf primitives are tested this many at a time (triangles in blocks of four, see
     /// [`crate::shape::Tri4`]), so the SAH counts a leaf of `n` primitives as `⌈n / leaf_block⌉`
