@@ -278,40 +278,51 @@ impl TriData {
         TriData::Leaves { blocks, ranges }
     }
 
-    /// Closest triangle hit with `t < t_max` (updated): `(triangle, hit)`.
+    /// Closest triangle hit with `t < t_max` (updated): `(triangle, hit)`. `r4` is the ray
+    /// prepared for the triangle tests (shared by every untransformed object a ray meets).
     #[inline(always)]
     fn closest<A: Accel>(
         &self,
         accel: &A,
         ray: &Ray,
-        wr: WatertightRay,
+        r4: &Ray4,
         t_max: &mut f32,
         counter: &impl Counter,
     ) -> Option<(u32, TriHit)> {
         let mut rec = None;
         match self {
             TriData::Leaves { blocks, ranges } => {
-                let r4 = Ray4::new(wr);
-                accel.closest_leaf_counted(
-                    ray,
-                    t_max,
-                    |leaf, mut tm| {
-                        let (a, b) = ranges[leaf as usize];
-                        let mut found = None;
-                        for block in &blocks[a as usize..b as usize] {
-                            for _ in 0..block.len() {
-                                counter.prim();
-                            }
-                            if let Some((tri, h)) = block.closest(&r4, tm) {
-                                tm = h.t;
-                                found = Some(h.t);
-                                rec = Some((tri, h));
-                            }
+                let mut leaf = |blocks: &[Tri4], mut tm: f32| {
+                    let mut found = None;
+                    for block in blocks {
+                        for _ in 0..block.len() {
+                            counter.prim();
                         }
-                        found
-                    },
-                    counter,
-                );
+                        if let Some((tri, h)) = block.closest(r4, tm) {
+                            tm = h.t;
+                            found = Some(h.t);
+                            rec = Some((tri, h));
+                        }
+                    }
+                    found
+                };
+                if let [(a, b)] = ranges[..] {
+                    // A single leaf (a small mesh: a quad, a box): its blocks are tested
+                    // straight away. The caller has culled by the object's box already.
+                    if let Some(t) = leaf(&blocks[a as usize..b as usize], *t_max) {
+                        *t_max = t;
+                    }
+                } else {
+                    accel.closest_leaf_counted(
+                        ray,
+                        t_max,
+                        |l, tm| {
+                            let (a, b) = ranges[l as usize];
+                            leaf(&blocks[a as usize..b as usize], tm)
+                        },
+                        counter,
+                    );
+                }
             }
             TriData::Single(tris) => {
                 accel.closest_counted(
@@ -320,7 +331,7 @@ impl TriData {
                     |tri, tm| {
                         counter.prim();
                         let [a, b, c] = tris[tri as usize];
-                        intersect_triangle(&wr, a, b, c, tm).map(|h| {
+                        intersect_triangle(&r4.ray, a, b, c, tm).map(|h| {
                             rec = Some((tri, h));
                             h.t
                         })
@@ -334,25 +345,35 @@ impl TriData {
 
     /// Whether any triangle is hit with `t < t_max`.
     #[inline(always)]
-    fn any<A: Accel>(&self, accel: &A, ray: &Ray, wr: WatertightRay, t_max: f32) -> bool {
+    fn any<A: Accel>(&self, accel: &A, ray: &Ray, r4: &Ray4, t_max: f32) -> bool {
         match self {
             TriData::Leaves { blocks, ranges } => {
-                let r4 = Ray4::new(wr);
-                accel.any_leaf_counted(
-                    ray,
-                    t_max,
-                    |leaf, tm| {
-                        let (a, b) = ranges[leaf as usize];
-                        blocks[a as usize..b as usize].iter().any(|block| block.any(&r4, tm))
-                    },
-                    &NoCount,
-                )
+                let leaf =
+                    |(a, b): (u32, u32), tm: f32| blocks[a as usize..b as usize].iter().any(|block| block.any(r4, tm));
+                if let [range] = ranges[..] {
+                    leaf(range, t_max)
+                } else {
+                    accel.any_leaf_counted(ray, t_max, |l, tm| leaf(ranges[l as usize], tm), &NoCount)
+                }
             }
             TriData::Single(tris) => accel.any(ray, t_max, |tri, tm| {
                 let [a, b, c] = tris[tri as usize];
-                intersect_triangle(&wr, a, b, c, tm).is_some()
+                intersect_triangle(&r4.ray, a, b, c, tm).is_some()
             }),
         }
+    }
+}
+
+/// The ray in `o`'s space and prepared for its triangle tests. Untransformed objects share one
+/// preparation per ray (`shared`, made when the first of them is met).
+#[inline(always)]
+fn mesh_ray(o: &Object, ray: &Ray, shared: &mut Option<Ray4>) -> (Ray, Ray4) {
+    match &o.transform {
+        Some(x) => {
+            let local = x.ray_to_object(ray);
+            (local, Ray4::new(WatertightRay::new(local.o, local.d)))
+        }
+        None => (*ray, *shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)))),
     }
 }
 
@@ -522,22 +543,22 @@ impl<'s, A: Accel> World<'s, A> {
         // (object, primitive, b1, b2)
         let mut best: Option<(u32, u32, f32, f32)> = None;
         let mut t = t_max;
+        let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
             counter.prim();
             let o = &self.scene.objects[obj as usize];
-            let local = match &o.transform {
-                Some(x) => x.ray_to_object(ray),
-                None => *ray,
-            };
             match &self.scene.geometries[o.geometry] {
-                Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
-                    best = Some((obj, 0, 0.0, 0.0));
-                }),
+                Geometry::Sphere(s) => {
+                    let local = o.transform.as_ref().map_or(*ray, |x| x.ray_to_object(ray));
+                    intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
+                        best = Some((obj, 0, 0.0, 0.0));
+                    })
+                }
                 Geometry::Mesh(_) => {
                     let accel = self.blas[o.geometry].as_ref()?;
-                    let wr = WatertightRay::new(local.o, local.d);
+                    let (local, r4) = mesh_ray(o, ray, &mut shared);
                     let mut tm = tmax;
-                    let (tri, h) = self.tris[o.geometry].closest(accel, &local, wr, &mut tm, counter)?;
+                    let (tri, h) = self.tris[o.geometry].closest(accel, &local, &r4, &mut tm, counter)?;
                     best = Some((obj, tri, h.b1, h.b2));
                     Some(tm)
                 }
@@ -589,17 +610,18 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
-        let test = |obj: u32, tmax: f32| {
+        let mut shared = None;
+        let mut test = |obj: u32, tmax: f32| {
             let o = &self.scene.objects[obj as usize];
-            let local = match &o.transform {
-                Some(x) => x.ray_to_object(ray),
-                None => *ray,
-            };
             match &self.scene.geometries[o.geometry] {
-                Geometry::Sphere(s) => intersect_sphere(s, local.o, local.d, tmax).is_some(),
+                Geometry::Sphere(s) => {
+                    let local = o.transform.as_ref().map_or(*ray, |x| x.ray_to_object(ray));
+                    intersect_sphere(s, local.o, local.d, tmax).is_some()
+                }
                 Geometry::Mesh(_) => {
                     let Some(accel) = self.blas[o.geometry].as_ref() else { return false };
-                    self.tris[o.geometry].any(accel, &local, WatertightRay::new(local.o, local.d), tmax)
+                    let (local, r4) = mesh_ray(o, ray, &mut shared);
+                    self.tris[o.geometry].any(accel, &local, &r4, tmax)
                 }
             }
         };
