@@ -198,8 +198,9 @@ fn bvh_statistics_are_sane() {
     let Geometry::Mesh(m) = &scene.geometries[0] else { unreachable!() };
     // Every non-degenerate-box triangle is referenced exactly once (a BVH never duplicates).
     assert_eq!(soup.prim_refs, m.indices.len());
-    // 4-wide nodes: at least (leaves - 1) / 3 of them, at most leaves - 1.
-    assert!(soup.nodes >= (soup.leaves - 1) / 3 && soup.nodes < soup.leaves, "{soup:?}");
+    // Wide nodes: at least (leaves - 1) / (width - 1) of them, at most leaves - 1.
+    let w = snell_core::accel::BVH_WIDTH;
+    assert!(soup.nodes >= (soup.leaves - 1) / (w - 1) && soup.nodes < soup.leaves, "{soup:?}");
     assert!(soup.max_depth <= 24);
     assert!(soup.sah_cost > 1.0 && soup.sah_cost < m.indices.len() as f32);
 }
