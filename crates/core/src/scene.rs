@@ -308,7 +308,8 @@ impl TriData {
                 };
                 if let [(a, b)] = ranges[..] {
                     // A single leaf (a small mesh: a quad, a box): its blocks are tested
-                    // straight away. The caller has culled by the object's box already.
+                    // straight away. The top level has tested the object's box already (a
+                    // one-object scene has none; the exact block tests decide alone there).
                     if let Some(t) = leaf(&blocks[a as usize..b as usize], *t_max) {
                         *t_max = t;
                     }
