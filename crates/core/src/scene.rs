@@ -498,7 +498,7 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// Bytes of triangle data laid out for the bottom-level structures (blocks of four, or one
     /// record per triangle), which traversal reads besides the structures themselves.
-    pub fn triangle_bytes(&self) -> usize {
+    fn triangle_bytes(&self) -> usize {
         self.tris
             .iter()
             .map(|t| match t {

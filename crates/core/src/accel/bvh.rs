@@ -287,7 +287,8 @@ pub struct Bvh {
     /// costs one box test (a 2-triangle quad has no node of its own to cull with).
     root_box: Aabb,
     stats: AccelStats,
-    /// Whether this CPU has AVX2: the traversal then tests a node's eight boxes in one register.
+    /// Whether this CPU has AVX2: single rays then test a node's eight boxes in one register,
+    /// and packets run in AVX2 lanes.
     avx: bool,
 }
 
@@ -1167,8 +1168,8 @@ impl Accel for Bvh {
         mut test: impl FnMut(u32, usize, f32) -> Option<f32>,
     ) -> u8 {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: AVX2 was detected on this CPU.
+        if self.avx {
+            // SAFETY: `avx` is set only where AVX2 was detected.
             return unsafe { packet::closest8(self, rays, active, t_max, &mut test) };
         }
         super::lane_by_lane(self, rays, active, t_max, test)
