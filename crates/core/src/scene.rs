@@ -233,6 +233,10 @@ pub struct Intersection {
     pub object: u32,
 }
 
+/// Meshes of at most this many triangles (four blocks) are tested block by block, without
+/// their tree.
+const SMALL_MESH: usize = 16;
+
 /// The triangles of one mesh, laid out for its bottom-level structure: in blocks of four per
 /// leaf ([`Tri4`], tested four at a time) when the structure tests whole leaves, otherwise one
 /// 36-byte record of corners per triangle (no gather through the index buffer either way).
@@ -247,9 +251,16 @@ enum TriData {
 
 impl TriData {
     fn new<A: Accel>(m: &Mesh, accel: &A) -> TriData {
-        let Some(leaves) = accel.leaves() else {
+        let Some(mut leaves) = accel.leaves() else {
             return TriData::Single((0..m.indices.len()).map(|i| m.triangle(i)).collect());
         };
+        // A small mesh (a box, a few quads) is one leaf: its few blocks are tested straight
+        // away, which costs less than entering a tree over them.
+        let all: Vec<u32>;
+        if m.indices.len() <= SMALL_MESH && leaves.len() > 1 {
+            all = leaves.concat();
+            leaves = vec![&all];
+        }
         use rayon::prelude::*;
         let mut start = 0u32;
         let ranges = leaves
@@ -365,16 +376,17 @@ impl TriData {
     }
 }
 
-/// The ray in `o`'s space and prepared for its triangle tests. Untransformed objects share one
-/// preparation per ray (`shared`, made when the first of them is met).
+/// Calls `f` with the ray in `o`'s space and the ray prepared for its triangle tests.
+/// Untransformed objects share one preparation per ray (`shared`, made when the first of them
+/// is met), lent by reference rather than copied.
 #[inline(always)]
-fn mesh_ray(o: &Object, ray: &Ray, shared: &mut Option<Ray4>) -> (Ray, Ray4) {
+fn with_mesh_ray<R>(o: &Object, ray: &Ray, shared: &mut Option<Ray4>, f: impl FnOnce(&Ray, &Ray4) -> R) -> R {
     match &o.transform {
         Some(x) => {
             let local = x.ray_to_object(ray);
-            (local, Ray4::new(WatertightRay::new(local.o, local.d)))
+            f(&local, &Ray4::new(WatertightRay::new(local.o, local.d)))
         }
-        None => (*ray, *shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)))),
+        None => f(ray, shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)))),
     }
 }
 
@@ -557,9 +569,10 @@ impl<'s, A: Accel> World<'s, A> {
                 }
                 Geometry::Mesh(_) => {
                     let accel = self.blas[o.geometry].as_ref()?;
-                    let (local, r4) = mesh_ray(o, ray, &mut shared);
                     let mut tm = tmax;
-                    let (tri, h) = self.tris[o.geometry].closest(accel, &local, &r4, &mut tm, counter)?;
+                    let (tri, h) = with_mesh_ray(o, ray, &mut shared, |local, r4| {
+                        self.tris[o.geometry].closest(accel, local, r4, &mut tm, counter)
+                    })?;
                     best = Some((obj, tri, h.b1, h.b2));
                     Some(tm)
                 }
@@ -621,8 +634,7 @@ impl<'s, A: Accel> World<'s, A> {
                 }
                 Geometry::Mesh(_) => {
                     let Some(accel) = self.blas[o.geometry].as_ref() else { return false };
-                    let (local, r4) = mesh_ray(o, ray, &mut shared);
-                    self.tris[o.geometry].any(accel, &local, &r4, tmax)
+                    with_mesh_ray(o, ray, &mut shared, |local, r4| self.tris[o.geometry].any(accel, local, r4, tmax))
                 }
             }
         };

@@ -21,13 +21,14 @@ pub struct Tri4 {
 }
 
 /// Per-ray data of the 4-wide test: the watertight ray, its origin in sheared-axis order and
-/// the shear constants, each broadcast to four lanes.
+/// the shear constants (broadcast to the four lanes by the test itself, so that the ray stays
+/// small enough to pass around and copy cheaply).
 #[derive(Clone, Copy, Debug)]
 pub struct Ray4 {
     pub ray: WatertightRay,
-    o: [[f32; 4]; 3],
-    s: [[f32; 4]; 3],
-    k: [usize; 3],
+    o: [f32; 3],
+    s: [f32; 3],
+    k: [u8; 3],
 }
 
 impl Ray4 {
@@ -35,8 +36,7 @@ impl Ray4 {
     pub fn new(ray: WatertightRay) -> Ray4 {
         let k = ray.axes();
         let o = ray.o.to_array();
-        let [sx, sy, sz] = ray.shear();
-        Ray4 { ray, o: [[o[k[0]]; 4], [o[k[1]]; 4], [o[k[2]]; 4]], s: [[sx; 4], [sy; 4], [sz; 4]], k }
+        Ray4 { ray, o: [o[k[0]], o[k[1]], o[k[2]]], s: ray.shear(), k: k.map(|a| a as u8) }
     }
 }
 
@@ -137,21 +137,18 @@ impl Tri4 {
     }
 
     /// The four tests in SSE lanes: `(hit mask, t, det, v, w)`, or `None` when an edge function
-    /// of a used lane is exactly zero (the scalar test must decide those).
+    /// of a lane is exactly zero (the scalar test must decide those).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     #[allow(clippy::type_complexity)]
     fn lanes(&self, r: &Ray4, t_max: f32) -> Option<(u32, [f32; 4], [f32; 4], [f32; 4], [f32; 4])> {
         use std::arch::x86_64::*;
         // SAFETY: SSE and SSE2 are part of the x86_64 baseline. All loads read 16-byte arrays
-        // inside `self` and `r` (`self` is 16-byte aligned; `r` is read with `loadu`), and all
-        // stores go to local four-float arrays.
+        // inside `self` (16-byte aligned), and all stores go to local four-float arrays.
         unsafe {
-            let [kx, ky, kz] = r.k;
-            let (ox, oy, oz) =
-                (_mm_loadu_ps(r.o[0].as_ptr()), _mm_loadu_ps(r.o[1].as_ptr()), _mm_loadu_ps(r.o[2].as_ptr()));
-            let (sx, sy, sz) =
-                (_mm_loadu_ps(r.s[0].as_ptr()), _mm_loadu_ps(r.s[1].as_ptr()), _mm_loadu_ps(r.s[2].as_ptr()));
+            let [kx, ky, kz] = r.k.map(usize::from);
+            let (ox, oy, oz) = (_mm_set1_ps(r.o[0]), _mm_set1_ps(r.o[1]), _mm_set1_ps(r.o[2]));
+            let (sx, sy, sz) = (_mm_set1_ps(r.s[0]), _mm_set1_ps(r.s[1]), _mm_set1_ps(r.s[2]));
             // Per vertex: projected x, y and the scaled z, exactly as the scalar test.
             let project = |p: &[[f32; 4]; 3]| {
                 let x = _mm_sub_ps(_mm_load_ps(p[kx].as_ptr()), ox);
@@ -166,21 +163,23 @@ impl Tri4 {
             let v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
             let w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
             let zero = _mm_setzero_ps();
-            let used = _mm_castsi128_ps(_mm_xor_si128(
-                _mm_cmpeq_epi32(_mm_load_si128(self.id.as_ptr().cast()), _mm_set1_epi32(-1)),
-                _mm_set1_epi32(-1),
-            ));
+            // Unused lanes hold NaN corners: their edge functions are NaN, which no comparison
+            // below lets through (NaN is never zero, and its det is not finite).
             let any_zero = _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)), _mm_cmpeq_ps(w, zero));
-            if _mm_movemask_ps(_mm_and_ps(any_zero, used)) != 0 {
+            if _mm_movemask_ps(any_zero) != 0 {
                 return None;
             }
             let neg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)), _mm_cmplt_ps(w, zero));
             let pos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)), _mm_cmpgt_ps(w, zero));
+            // Rejected: both signs among the edge functions (most blocks a ray meets end here).
+            let mut ok = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_cmpord_ps(u, u));
+            if _mm_movemask_ps(ok) == 0 {
+                return Some((0, [0.0; 4], [0.0; 4], [0.0; 4], [0.0; 4]));
+            }
             let det = _mm_add_ps(_mm_add_ps(u, v), w);
             let sign = _mm_and_ps(det, _mm_set1_ps(-0.0));
             let abs_det = _mm_andnot_ps(_mm_set1_ps(-0.0), det);
-            // Rejected: both signs among the edge functions, det zero or not finite.
-            let mut ok = _mm_andnot_ps(_mm_and_ps(neg, pos), used);
+            // Rejected: det zero or not finite.
             ok = _mm_and_ps(ok, _mm_cmpneq_ps(det, zero));
             ok = _mm_and_ps(ok, _mm_cmplt_ps(abs_det, _mm_set1_ps(f32::INFINITY)));
             let ts = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u, az), _mm_mul_ps(v, bz)), _mm_mul_ps(w, cz));
