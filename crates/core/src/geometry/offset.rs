@@ -12,6 +12,7 @@ const ORIGIN: f32 = 1.0 / 32.0;
 const FLOAT_SCALE: f32 = 1.0 / 65536.0;
 const INT_SCALE: f32 = 256.0;
 
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
 #[inline]
 fn offset_component(p: f32, n: f32) -> f32 {
     if p.abs() < ORIGIN {
@@ -27,7 +28,38 @@ fn offset_component(p: f32, n: f32) -> f32 {
 #[inline]
 pub fn offset_ray_origin(p: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
     let n = if ng.dot(w) < 0.0 { -ng } else { ng };
-    Vec3::new(offset_component(p.x, n.x), offset_component(p.y, n.y), offset_component(p.z, n.z))
+    #[cfg(target_arch = "x86_64")]
+    {
+        offset_sse(p, n)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        Vec3::new(offset_component(p.x, n.x), offset_component(p.y, n.y), offset_component(p.z, n.z))
+    }
+}
+
+/// [`offset_component`] on the three axes at once in SSE2 lanes: the same arithmetic (the
+/// sign bit picks the direction where `|p| >= ORIGIN`, which is `p < 0` there), so the same
+/// bits for finite input.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn offset_sse(p: Vec3, n: Vec3) -> Vec3 {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of the x86_64 baseline; only registers are used.
+    unsafe {
+        let pv = _mm_setr_ps(p.x, p.y, p.z, 0.0);
+        let nv = _mm_setr_ps(n.x, n.y, n.z, 0.0);
+        let near = _mm_cmplt_ps(_mm_andnot_ps(_mm_set1_ps(-0.0), pv), _mm_set1_ps(ORIGIN));
+        let small = _mm_add_ps(pv, _mm_mul_ps(_mm_set1_ps(FLOAT_SCALE), nv));
+        let of_i = _mm_cvttps_epi32(_mm_mul_ps(_mm_set1_ps(INT_SCALE), nv));
+        let bits = _mm_castps_si128(pv);
+        let neg = _mm_srai_epi32(bits, 31);
+        let moved = _mm_add_epi32(bits, _mm_sub_epi32(_mm_xor_si128(of_i, neg), neg));
+        let r = _mm_or_ps(_mm_and_ps(near, small), _mm_andnot_ps(near, _mm_castsi128_ps(moved)));
+        let mut out = [0.0f32; 4];
+        _mm_storeu_ps(out.as_mut_ptr(), r);
+        Vec3::new(out[0], out[1], out[2])
+    }
 }
 
 /// A ray leaving the surface point `p` (geometric normal `ng`) in direction `d`.
@@ -58,6 +90,22 @@ mod tests {
             let down = offset_ray_origin(p, n, -n);
             assert!((up - p).dot(n) > 0.0, "{p}");
             assert!((down - p).dot(n) < 0.0, "{p}");
+        }
+    }
+
+    /// The three-lane offset gives the scalar one's bits, near the origin and far from it, on
+    /// both sides of zero.
+    #[test]
+    fn lanes_match_the_scalar_offset() {
+        let mut rng = crate::sampling::Pcg32::new(3, 5);
+        for i in 0..100_000 {
+            let scale = [1e-3f32, 0.03, 1.0, 1e3, 1e6][i % 5];
+            let mut c = || (rng.next_f32() - 0.5) * 2.0 * scale;
+            let p = Vec3::new(c(), c(), c());
+            let n = Vec3::new(c(), c(), c()).normalize_or(Vec3::Z);
+            let got = offset_ray_origin(p, n, n);
+            let want = Vec3::new(offset_component(p.x, n.x), offset_component(p.y, n.y), offset_component(p.z, n.z));
+            assert_eq!(got.to_array().map(f32::to_bits), want.to_array().map(f32::to_bits), "{p} {n}");
         }
     }
 }
