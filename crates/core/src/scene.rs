@@ -233,6 +233,19 @@ pub struct Intersection {
     pub object: u32,
 }
 
+/// A leaf's block range `a..b` as a leaf label (see [`Accel::relabel_leaves`]): the first
+/// block above three bits of count (1 to 8 blocks), or `None` where it does not fit.
+fn label_of_range(a: u32, b: u32) -> Option<u32> {
+    (b > a && b - a <= 8 && b < 1 << 27).then_some(a << 3 | (b - a - 1))
+}
+
+/// The block range a leaf label encodes.
+#[inline(always)]
+fn block_range(label: u32) -> (u32, u32) {
+    let a = label >> 3;
+    (a, a + (label & 7) + 1)
+}
+
 /// Meshes of at most this many triangles (four blocks) are tested block by block, without
 /// their tree.
 const SMALL_MESH: usize = 16;
@@ -241,16 +254,19 @@ const SMALL_MESH: usize = 16;
 /// leaf ([`Tri4`], tested four at a time) when the structure tests whole leaves, otherwise one
 /// 36-byte record of corners per triangle (no gather through the index buffer either way).
 enum TriData {
-    /// `blocks[ranges[leaf].0 .. ranges[leaf].1]` hold the triangles of each leaf.
+    /// `blocks[ranges[leaf].0 .. ranges[leaf].1]` hold the triangles of each leaf. Where
+    /// `labelled`, the structure hands each leaf's range itself to the leaf test instead of its
+    /// index ([`Accel::relabel_leaves`], decoded by [`block_range`]).
     Leaves {
         blocks: Vec<Tri4>,
         ranges: Vec<(u32, u32)>,
+        labelled: bool,
     },
     Single(Vec<[Vec3; 3]>),
 }
 
 impl TriData {
-    fn new<A: Accel>(m: &Mesh, accel: &A) -> TriData {
+    fn new<A: Accel>(m: &Mesh, accel: &mut A) -> TriData {
         let Some(mut leaves) = accel.leaves() else {
             return TriData::Single((0..m.indices.len()).map(|i| m.triangle(i)).collect());
         };
@@ -263,7 +279,7 @@ impl TriData {
         }
         use rayon::prelude::*;
         let mut start = 0u32;
-        let ranges = leaves
+        let ranges: Vec<(u32, u32)> = leaves
             .iter()
             .map(|prims| {
                 let r = (start, start + prims.len().div_ceil(4) as u32);
@@ -286,7 +302,18 @@ impl TriData {
                 Tri4::pack(c.iter().map(|&p| (p, m.triangle(p as usize))))
             })
             .collect();
-        TriData::Leaves { blocks, ranges }
+        // Each leaf's range rides in the structure's leaf reference where it fits.
+        let labels: Option<Vec<u32>> =
+            if ranges.len() > 1 { ranges.iter().map(|&(a, b)| label_of_range(a, b)).collect() } else { None };
+        let labelled = labels.is_some_and(|l| accel.relabel_leaves(&l));
+        TriData::Leaves { blocks, ranges, labelled }
+    }
+
+    /// The blocks of leaf `leaf` (an index, or the label that encodes the range).
+    #[inline(always)]
+    fn leaf_blocks<'a>(blocks: &'a [Tri4], ranges: &[(u32, u32)], labelled: bool, leaf: u32) -> &'a [Tri4] {
+        let (a, b) = if labelled { block_range(leaf) } else { ranges[leaf as usize] };
+        &blocks[a as usize..b as usize]
     }
 
     /// Closest triangle hit with `t < t_max` (updated): `(triangle, hit)`. `r4` is the ray
@@ -302,7 +329,7 @@ impl TriData {
     ) -> Option<(u32, TriHit)> {
         let mut rec = None;
         match self {
-            TriData::Leaves { blocks, ranges } => {
+            TriData::Leaves { blocks, ranges, labelled } => {
                 let mut leaf = |blocks: &[Tri4], mut tm: f32| {
                     let mut found = None;
                     for block in blocks {
@@ -328,10 +355,7 @@ impl TriData {
                     accel.closest_leaf_counted(
                         ray,
                         t_max,
-                        |l, tm| {
-                            let (a, b) = ranges[l as usize];
-                            leaf(&blocks[a as usize..b as usize], tm)
-                        },
+                        |l, tm| leaf(TriData::leaf_blocks(blocks, ranges, *labelled, l), tm),
                         counter,
                     );
                 }
@@ -359,13 +383,17 @@ impl TriData {
     #[inline(always)]
     fn any<A: Accel>(&self, accel: &A, ray: &Ray, r4: &Ray4, t_max: f32) -> bool {
         match self {
-            TriData::Leaves { blocks, ranges } => {
-                let leaf =
-                    |(a, b): (u32, u32), tm: f32| blocks[a as usize..b as usize].iter().any(|block| block.any(r4, tm));
-                if let [range] = ranges[..] {
-                    leaf(range, t_max)
+            TriData::Leaves { blocks, ranges, labelled } => {
+                let leaf = |blocks: &[Tri4], tm: f32| blocks.iter().any(|block| block.any(r4, tm));
+                if let [(a, b)] = ranges[..] {
+                    leaf(&blocks[a as usize..b as usize], t_max)
                 } else {
-                    accel.any_leaf_counted(ray, t_max, |l, tm| leaf(ranges[l as usize], tm), &NoCount)
+                    accel.any_leaf_counted(
+                        ray,
+                        t_max,
+                        |l, tm| leaf(TriData::leaf_blocks(blocks, ranges, *labelled, l), tm),
+                        &NoCount,
+                    )
                 }
             }
             TriData::Single(tris) => accel.any(ray, t_max, |tri, tm| {
@@ -410,7 +438,7 @@ pub struct World<'s, A: Accel> {
 impl<'s, A: Accel> World<'s, A> {
     pub fn build(scene: &'s Scene, params: &A::Params) -> World<'s, A> {
         use rayon::prelude::*;
-        let blas: Vec<Option<A>> = scene
+        let mut blas: Vec<Option<A>> = scene
             .geometries
             .par_iter()
             .map(|g| match g {
@@ -427,7 +455,7 @@ impl<'s, A: Accel> World<'s, A> {
         let tris = scene
             .geometries
             .iter()
-            .zip(&blas)
+            .zip(&mut blas)
             .map(|(g, accel)| match (g, accel) {
                 (Geometry::Mesh(m), Some(accel)) => TriData::new(m, accel),
                 _ => TriData::Single(Vec::new()),
@@ -514,7 +542,7 @@ impl<'s, A: Accel> World<'s, A> {
         self.tris
             .iter()
             .map(|t| match t {
-                TriData::Leaves { blocks, ranges } => {
+                TriData::Leaves { blocks, ranges, .. } => {
                     blocks.len() * std::mem::size_of::<Tri4>() + ranges.len() * std::mem::size_of::<(u32, u32)>()
                 }
                 TriData::Single(t) => t.len() * std::mem::size_of::<[Vec3; 3]>(),
@@ -601,16 +629,19 @@ impl<'s, A: Accel> World<'s, A> {
         let (Some(g), Some(accel)) = (single, single.and_then(|g| self.blas[g].as_ref())) else {
             return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
         };
-        let TriData::Leaves { blocks, ranges } = &self.tris[g] else {
+        // A mesh tested as one leaf (a small one) has no tree to share between the rays.
+        let TriData::Leaves { blocks, ranges, labelled } = &self.tris[g] else {
             return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
         };
+        if ranges.len() == 1 {
+            return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
+        }
         let r4: [Ray4; 8] = std::array::from_fn(|i| Ray4::new(WatertightRay::new(rays[i].o, rays[i].d)));
         let mut t = [f32::INFINITY; 8];
         let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
         accel.closest_leaf_packet8(rays, 0xff, &mut t, |leaf, lane, mut tm| {
-            let (a, b) = ranges[leaf as usize];
             let mut found = None;
-            for block in &blocks[a as usize..b as usize] {
+            for block in TriData::leaf_blocks(blocks, ranges, *labelled, leaf) {
                 if let Some((tri, h)) = block.closest(&r4[lane], tm) {
                     tm = h.t;
                     found = Some(h.t);
@@ -717,6 +748,19 @@ mod tests {
         let mut m = Mesh::quad(corner, e1, e2);
         m.validate().unwrap();
         m
+    }
+
+    #[test]
+    fn leaf_labels_give_back_their_block_ranges() {
+        for (a, b) in [(0, 1), (0, 8), (5, 6), (123_456, 123_463), ((1 << 27) - 9, (1 << 27) - 1)] {
+            let l = label_of_range(a, b).unwrap();
+            assert!(l < (1 << 31) - 1);
+            assert_eq!(block_range(l), (a, b));
+        }
+        // Nine blocks, an empty range, or a range past 2^27 blocks stay with the table.
+        assert_eq!(label_of_range(0, 9), None);
+        assert_eq!(label_of_range(3, 3), None);
+        assert_eq!(label_of_range((1 << 27) - 1, 1 << 27), None);
     }
 
     #[test]

@@ -374,7 +374,7 @@ fn traversal_counts_and_structure_boxes() {
 /// Packets of eight rays (coherent camera rays and incoherent random ones) get exactly the hits
 /// that each ray gets alone, for every accelerator (the BVHs' AVX2 packet traversal where the
 /// CPU has it, one by one elsewhere), on a single mesh (where packets are used) and on the
-/// two-level adversarial scene (where they fall back to single rays).
+/// two-level adversarial scene and a small mesh (where they fall back to single rays).
 #[test]
 fn ray_packets_hit_what_single_rays_hit() {
     let mut mesh = Mesh::icosphere(4);
@@ -390,7 +390,11 @@ fn ray_packets_hit_what_single_rays_hit() {
     let coherent: Vec<Ray> = (0..64 * 64)
         .map(|i| camera.ray(glam::Vec2::new((i % 64) as f32 + 0.5, (i / 64) as f32 + 0.5), 64, 64, glam::Vec2::ZERO))
         .collect();
-    for (name, scene) in [("mesh", single), ("two-level", adversarial_scene(2))] {
+    // A small mesh (16 triangles or fewer) is tested as one leaf, without its tree.
+    let small = Mesh::cuboid(Vec3::splat(-1.2), Vec3::new(1.0, 0.8, 1.1));
+    let small =
+        Scene { geometries: vec![Geometry::Mesh(small)], objects: vec![object(0, None)], ..adversarial_scene(1) };
+    for (name, scene) in [("mesh", single), ("small mesh", small), ("two-level", adversarial_scene(2))] {
         let mut all = coherent.clone();
         all.extend(rays(&scene, 800, 5));
         for kind in AccelKind::ALL {

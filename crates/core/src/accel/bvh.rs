@@ -283,6 +283,11 @@ pub struct Bvh {
     prims: Vec<u32>,
     /// Whether the root is itself a leaf (then `leaves[0]` holds everything).
     root_leaf: bool,
+    /// The reference the traversals start from when the root is a leaf: `LEAF` and its label.
+    root_ref: u32,
+    /// Whether the leaf references in the nodes carry the caller's labels
+    /// ([`Accel::relabel_leaves`]) rather than indices into `leaves`.
+    relabeled: bool,
     /// Bounds of everything: tested first, so that a ray that misses a small mesh entirely
     /// costs one box test (a 2-triangle quad has no node of its own to cull with).
     root_box: Aabb,
@@ -884,6 +889,7 @@ fn prefetch_children(nodes: &[Wide], n: &Wide, mut mask: u32) {
 
 impl Bvh {
     fn leaf(&self, leaf: u32) -> &[u32] {
+        assert!(!self.relabeled, "primitive-level queries on a relabelled BVH");
         let (first, count) = self.leaves[leaf as usize];
         &self.prims[first as usize..(first + count) as usize]
     }
@@ -904,7 +910,7 @@ impl Bvh {
         // A tree that is a single leaf starts at that leaf (one call site of `test`, so that
         // it is inlined).
         let root = if self.root_leaf {
-            LEAF
+            self.root_ref
         } else if self.nodes.is_empty() {
             return false;
         } else {
@@ -956,7 +962,7 @@ impl Bvh {
             return false;
         }
         let root = if self.root_leaf {
-            LEAF
+            self.root_ref
         } else if self.nodes.is_empty() {
             return false;
         } else {
@@ -1100,7 +1106,7 @@ mod packet {
             }
         };
         if bvh.root_leaf {
-            leaf(0, active as u32, t_max, &mut hits);
+            leaf(bvh.root_ref & !LEAF, active as u32, t_max, &mut hits);
             return hits;
         }
         if bvh.nodes.is_empty() {
@@ -1238,7 +1244,7 @@ impl Accel for Bvh {
             sah_cost,
         };
         let root_box = bin.first().map_or(Aabb::EMPTY, |n| n.aabb());
-        Bvh { nodes, leaves, prims, root_leaf, root_box, stats, avx: has_avx2() }
+        Bvh { nodes, leaves, prims, root_leaf, root_ref: LEAF, relabeled: false, root_box, stats, avx: has_avx2() }
     }
 
     fn closest_counted(
@@ -1275,8 +1281,26 @@ impl Accel for Bvh {
         self.any_leaf_counted(ray, t_max, |leaf, tm| self.leaf(leaf).iter().any(|&p| test(p, tm)), counter)
     }
 
+    fn relabel_leaves(&mut self, labels: &[u32]) -> bool {
+        if self.relabeled || labels.len() != self.leaves.len() || labels.iter().any(|&l| l >= LEAF - 1) {
+            return false;
+        }
+        for n in &mut self.nodes {
+            for c in &mut n.child {
+                if *c != EMPTY && *c & LEAF != 0 {
+                    *c = LEAF | labels[(*c & !LEAF) as usize];
+                }
+            }
+        }
+        if self.root_leaf {
+            self.root_ref = LEAF | labels[0];
+        }
+        self.relabeled = true;
+        true
+    }
+
     fn leaves(&self) -> Option<Vec<&[u32]>> {
-        Some((0..self.leaves.len() as u32).map(|l| self.leaf(l)).collect())
+        Some(self.leaves.iter().map(|&(first, count)| &self.prims[first as usize..(first + count) as usize]).collect())
     }
 
     #[inline(always)]

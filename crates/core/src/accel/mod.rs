@@ -79,6 +79,17 @@ pub trait Accel: Send + Sync + Sized {
         None
     }
 
+    /// Replaces the leaf ids that the leaf-level queries ([`Accel::closest_leaf_counted`],
+    /// [`Accel::any_leaf_counted`], [`Accel::closest_leaf_packet8`]) hand to `test` by
+    /// `labels[leaf]`: a caller can put there what it would otherwise look up per leaf (the
+    /// triangle blocks' range, say), which saves a dependent memory access on every leaf a ray
+    /// reaches. Labels must be below `2^31 - 1`. Returns false, changing nothing, where the
+    /// structure has no leaves of its own (the default) or a label does not fit.
+    /// [`Accel::leaves`] keeps its numbering.
+    fn relabel_leaves(&mut self, _labels: &[u32]) -> bool {
+        false
+    }
+
     /// Closest hit, leaf at a time: `test(leaf, t_max)` tests all of a leaf's primitives and
     /// returns the closest `t < t_max` among them. Leaf ids are those of [`Accel::leaves`].
     fn closest_leaf_counted(
