@@ -236,7 +236,7 @@ pub struct Intersection {
 /// A leaf's block range `a..b` as a leaf label (see [`Accel::relabel_leaves`]): the first
 /// block above three bits of count (1 to 8 blocks), or `None` where it does not fit.
 fn label_of_range(a: u32, b: u32) -> Option<u32> {
-    (b > a && b - a <= 8 && b < 1 << 27).then_some(a << 3 | (b - a - 1))
+    (b > a && b - a <= 8 && b < 1 << 27).then(|| a << 3 | (b - a - 1))
 }
 
 /// The block range a leaf label encodes.
