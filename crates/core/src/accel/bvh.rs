@@ -664,22 +664,37 @@ fn collapse(bin: &[Node]) -> (Vec<Wide>, Vec<(u32, u32)>, usize) {
     nodes.push(Wide::EMPTY);
     while let Some((b, slot, depth)) = todo.pop() {
         max_depth = max_depth.max(depth);
-        let mut kids: Vec<usize> = vec![b + 1, bin[b].first as usize];
-        while kids.len() < WIDTH {
-            // Open the interior child with the largest surface area.
-            let best = kids
-                .iter()
-                .enumerate()
-                .filter(|(_, &k)| bin[k].count == 0)
-                .max_by(|a, b| bin[*a.1].aabb().half_area().total_cmp(&bin[*b.1].aabb().half_area()))
-                .map(|(i, _)| i);
+        // The children, and the half area of each interior one (-1 for leaves), in a fixed
+        // array: no allocation per node.
+        let area = |k: usize| if bin[k].count == 0 { bin[k].aabb().half_area() } else { -1.0 };
+        let mut kids = [0usize; WIDTH];
+        let mut areas = [0.0f32; WIDTH];
+        let mut len = 0;
+        for k in [b + 1, bin[b].first as usize] {
+            (kids[len], areas[len]) = (k, area(k));
+            len += 1;
+        }
+        while len < WIDTH {
+            // Open the interior child with the largest surface area (the last of equals, as
+            // `max_by` picks).
+            let mut best = None;
+            for i in 0..len {
+                if areas[i] >= 0.0 && best.is_none_or(|j: usize| areas[i].total_cmp(&areas[j]).is_ge()) {
+                    best = Some(i);
+                }
+            }
             let Some(i) = best else { break };
-            let k = kids.swap_remove(i);
-            kids.push(k + 1);
-            kids.push(bin[k].first as usize);
+            let k = kids[i];
+            // `swap_remove`, then two pushes.
+            len -= 1;
+            (kids[i], areas[i]) = (kids[len], areas[len]);
+            for c in [k + 1, bin[k].first as usize] {
+                (kids[len], areas[len]) = (c, area(c));
+                len += 1;
+            }
         }
         let mut n = Wide::EMPTY;
-        for (j, &k) in kids.iter().enumerate() {
+        for (j, &k) in kids[..len].iter().enumerate() {
             let c = &bin[k];
             for a in 0..3 {
                 n.bounds[a][j] = c.min[a];
@@ -1186,7 +1201,9 @@ impl Accel for Bvh {
     }
 
     fn build_clipped(boxes: &[Aabb], params: &BvhParams, clip: &super::Clipper<'_>) -> Self {
-        let mut prims: Vec<u32> = (0..boxes.len() as u32).filter(|&i| !boxes[i as usize].is_empty()).collect();
+        use rayon::prelude::*;
+        let mut prims: Vec<u32> =
+            (0..boxes.len() as u32).into_par_iter().filter(|&i| !boxes[i as usize].is_empty()).collect();
         let mut base = params.base;
         base.max_depth = base.max_depth.min(MAX_STACK - 1);
         base.max_leaf_prims = base.max_leaf_prims.max(1);
@@ -1206,7 +1223,6 @@ impl Accel for Bvh {
             prims = refs;
             nodes
         } else {
-            use rayon::prelude::*;
             let mut refs: Vec<PRef> = prims
                 .par_iter()
                 .map(|&p| {
@@ -1222,19 +1238,21 @@ impl Accel for Bvh {
                 refs.sort_unstable_by_key(|r| (r.code, r.id));
             }
             let nodes = b.subtree(&mut refs, 0, 0);
-            prims = refs.iter().map(|r| r.id).collect();
+            prims = refs.par_iter().map(|r| r.id).collect();
             nodes
         };
-        let max_depth_seen = binary_depth(&bin);
-        let sah_cost = binary_sah_cost(&bin, &base);
-        let (nodes, leaves, root_leaf) = match bin.first() {
-            None => (Vec::new(), Vec::new(), false),
-            Some(root) if root.count > 0 => (Vec::new(), vec![(root.first, root.count)], true),
-            Some(_) => {
-                let (n, l, _) = collapse(&bin);
-                (n, l, false)
-            }
-        };
+        // The statistics and the wide tree are independent walks of the binary tree.
+        let ((max_depth_seen, sah_cost), (nodes, leaves, root_leaf)) = rayon::join(
+            || (binary_depth(&bin), binary_sah_cost(&bin, &base)),
+            || match bin.first() {
+                None => (Vec::new(), Vec::new(), false),
+                Some(root) if root.count > 0 => (Vec::new(), vec![(root.first, root.count)], true),
+                Some(_) => {
+                    let (n, l, _) = collapse(&bin);
+                    (n, l, false)
+                }
+            },
+        );
         let stats = AccelStats {
             nodes: nodes.len(),
             leaves: leaves.len(),
