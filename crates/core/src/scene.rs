@@ -233,6 +233,22 @@ pub struct Intersection {
     pub object: u32,
 }
 
+/// The closest hit among `blocks` with `t < t_max`: `(triangle, hit)`.
+#[inline(always)]
+fn closest_in_blocks(blocks: &[Tri4], r4: &Ray4, mut t_max: f32, counter: &impl Counter) -> Option<(u32, TriHit)> {
+    let mut rec = None;
+    for block in blocks {
+        for _ in 0..block.len() {
+            counter.prim();
+        }
+        if let Some((tri, h)) = block.closest(r4, t_max) {
+            t_max = h.t;
+            rec = Some((tri, h));
+        }
+    }
+    rec
+}
+
 /// A leaf's block range `a..b` as a leaf label (see [`Accel::relabel_leaves`]): the first
 /// block above three bits of count (1 to 8 blocks), or `None` where it does not fit.
 fn label_of_range(a: u32, b: u32) -> Option<u32> {
@@ -245,6 +261,9 @@ fn block_range(label: u32) -> (u32, u32) {
     let a = label >> 3;
     (a, a + (label & 7) + 1)
 }
+
+/// `World::object_blocks`: the object is not an untransformed mesh of one block range.
+const NOT_DIRECT: u32 = u32::MAX;
 
 /// Meshes of at most this many triangles (four blocks) are tested block by block, without
 /// their tree.
@@ -309,6 +328,15 @@ impl TriData {
         TriData::Leaves { blocks, ranges, labelled }
     }
 
+    /// All the blocks (none where triangles are stored singly).
+    #[inline(always)]
+    fn blocks(&self) -> &[Tri4] {
+        match self {
+            TriData::Leaves { blocks, .. } => blocks,
+            TriData::Single(_) => &[],
+        }
+    }
+
     /// The blocks of leaf `leaf` (an index, or the label that encodes the range).
     #[inline(always)]
     fn leaf_blocks<'a>(blocks: &'a [Tri4], ranges: &[(u32, u32)], labelled: bool, leaf: u32) -> &'a [Tri4] {
@@ -330,19 +358,10 @@ impl TriData {
         let mut rec = None;
         match self {
             TriData::Leaves { blocks, ranges, labelled } => {
-                let mut leaf = |blocks: &[Tri4], mut tm: f32| {
-                    let mut found = None;
-                    for block in blocks {
-                        for _ in 0..block.len() {
-                            counter.prim();
-                        }
-                        if let Some((tri, h)) = block.closest(r4, tm) {
-                            tm = h.t;
-                            found = Some(h.t);
-                            rec = Some((tri, h));
-                        }
-                    }
-                    found
+                let mut leaf = |blocks: &[Tri4], tm: f32| {
+                    let found = closest_in_blocks(blocks, r4, tm, counter)?;
+                    rec = Some(found);
+                    Some(found.1.t)
                 };
                 if let [(a, b)] = ranges[..] {
                     // A single leaf (a small mesh: a quad, a box): its blocks are tested
@@ -426,6 +445,14 @@ pub struct World<'s, A: Accel> {
     blas: Vec<Option<A>>,
     /// Per geometry, the triangles laid out for its bottom-level structure.
     tris: Vec<TriData>,
+    /// Per object, `(geometry, first block, end)` where the object is an untransformed mesh
+    /// tested as one range of blocks: the top level's leaf test goes straight to them.
+    /// `NOT_DIRECT` in the first field otherwise.
+    object_blocks: Vec<(u32, u32, u32)>,
+    /// Whether the top level's leaf references are the objects themselves
+    /// ([`Accel::relabel_leaves`]; every leaf holds one object), so that its leaf-level query
+    /// hands the object straight to the test.
+    top_by_object: bool,
     pub lights: Vec<Light>,
     /// Running sum of the lights' powers, for choosing one in proportion to its power.
     light_cdf: Vec<f32>,
@@ -452,7 +479,7 @@ impl<'s, A: Accel> World<'s, A> {
                 Geometry::Sphere(_) => None,
             })
             .collect();
-        let tris = scene
+        let tris: Vec<TriData> = scene
             .geometries
             .iter()
             .zip(&mut blas)
@@ -470,7 +497,20 @@ impl<'s, A: Accel> World<'s, A> {
         top_params.base_mut().max_leaf_prims = 1;
         top_params.base_mut().sah_leaf_max = 1;
         top_params.base_mut().leaf_block = 1;
-        let top = A::build(&boxes, &top_params);
+        let mut top = A::build(&boxes, &top_params);
+        let labels: Option<Vec<u32>> =
+            top.leaves().and_then(|l| l.iter().map(|objs| if let [o] = objs[..] { Some(o) } else { None }).collect());
+        let top_by_object = labels.is_some_and(|l| top.relabel_leaves(&l));
+        let object_blocks = scene
+            .objects
+            .iter()
+            .map(|o| match (&tris[o.geometry], &o.transform, &scene.geometries[o.geometry]) {
+                (TriData::Leaves { ranges, .. }, None, Geometry::Mesh(_)) if ranges.len() == 1 => {
+                    (o.geometry as u32, ranges[0].0, ranges[0].1)
+                }
+                _ => (NOT_DIRECT, 0, 0),
+            })
+            .collect();
         let mut lights = scene.lights.clone();
         let mut object_light = vec![u32::MAX; scene.objects.len()];
         for (i, o) in scene.objects.iter().enumerate() {
@@ -493,7 +533,7 @@ impl<'s, A: Accel> World<'s, A> {
             }
         }));
         let environment = lights.iter().position(|l| matches!(l, Light::Environment(_)));
-        World { scene, top, blas, tris, lights, light_cdf, object_light, environment }
+        World { scene, top, blas, tris, object_blocks, top_by_object, lights, light_cdf, object_light, environment }
     }
 
     /// The environment light and its index in `lights`, if the scene has one.
@@ -587,6 +627,14 @@ impl<'s, A: Accel> World<'s, A> {
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
             counter.prim();
+            let (g, a, b) = self.object_blocks[obj as usize];
+            if g != NOT_DIRECT {
+                let r4 = shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)));
+                let (tri, h) =
+                    closest_in_blocks(&self.tris[g as usize].blocks()[a as usize..b as usize], r4, tmax, counter)?;
+                best = Some((obj, tri, h.b1, h.b2));
+                return Some(h.t);
+            }
             let o = &self.scene.objects[obj as usize];
             match &self.scene.geometries[o.geometry] {
                 Geometry::Sphere(s) => {
@@ -611,6 +659,8 @@ impl<'s, A: Accel> World<'s, A> {
             if let Some(hit_t) = test(0, t) {
                 t = hit_t;
             }
+        } else if self.top_by_object {
+            self.top.closest_leaf_counted(ray, &mut t, test, counter);
         } else {
             self.top.closest_counted(ray, &mut t, test, counter);
         }
@@ -657,6 +707,11 @@ impl<'s, A: Accel> World<'s, A> {
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
+            let (g, a, b) = self.object_blocks[obj as usize];
+            if g != NOT_DIRECT {
+                let r4 = shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)));
+                return self.tris[g as usize].blocks()[a as usize..b as usize].iter().any(|block| block.any(r4, tmax));
+            }
             let o = &self.scene.objects[obj as usize];
             match &self.scene.geometries[o.geometry] {
                 Geometry::Sphere(s) => {
@@ -671,6 +726,8 @@ impl<'s, A: Accel> World<'s, A> {
         };
         if self.scene.objects.len() == 1 {
             test(0, t_max)
+        } else if self.top_by_object {
+            self.top.any_leaf_counted(ray, t_max, test, &NoCount)
         } else {
             self.top.any(ray, t_max, test)
         }
