@@ -35,12 +35,7 @@ pub fn encode(image: &Image, format: ImageFormat) -> Result<Vec<u8>, String> {
             img.write_to(&mut buf, image::ImageFormat::Png).map_err(|e| e.to_string())?;
         }
         ImageFormat::Exr => {
-            let data: Vec<f32> = image.pixels.iter().flat_map(|p| p.to_array()).collect();
-            let img = image::Rgb32FImage::from_raw(image.width, image.height, data)
-                .ok_or("image size does not match its pixels")?;
-            image::DynamicImage::ImageRgb32F(img)
-                .write_to(&mut buf, image::ImageFormat::OpenExr)
-                .map_err(|e| e.to_string())?;
+            return encode_exr(image, &[]);
         }
     }
     Ok(buf.into_inner())
@@ -92,28 +87,69 @@ pub fn check_output(path: &Path) -> Result<(), Error> {
 /// (`albedo.R`, `normal.X`, `Z`, …), each `width × height` values row by row from the top left.
 /// Written whole or not at all, like [`write_image`].
 pub fn write_exr_channels(path: &Path, image: &Image, extra: &[(&str, Vec<f32>)]) -> Result<(), Error> {
-    use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, WritableImage};
     if format_for(path)? != ImageFormat::Exr {
         return Err(Error::new(path, "extra layers (AOVs) need an .exr output"));
     }
     let n = (image.width * image.height) as usize;
+    for (name, values) in extra {
+        if values.len() != n {
+            return Err(Error::new(path, format!("channel {name} has {} values for {n} pixels", values.len())));
+        }
+    }
+    let bytes = encode_exr(image, extra).map_err(|e| Error::new(path, e))?;
+    write_atomic(path, &bytes)
+}
+
+/// A linear float OpenEXR in memory: `R`, `G`, `B` and the `extra` channels (each one value
+/// per pixel). Blocks are compressed one after another and stored top to bottom, so the same
+/// image always gives the same bytes (a parallel writer stores them in the order they finish).
+fn encode_exr(image: &Image, extra: &[(&str, Vec<f32>)]) -> Result<Vec<u8>, String> {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, LineOrder, WritableImage,
+    };
     let mut list: Vec<AnyChannel<FlatSamples>> = Vec::new();
     for (c, name) in ["R", "G", "B"].iter().enumerate() {
         list.push(AnyChannel::new(*name, FlatSamples::F32(image.pixels.iter().map(|p| p[c]).collect())));
     }
     for (name, values) in extra {
-        if values.len() != n {
-            return Err(Error::new(path, format!("channel {name} has {} values for {n} pixels", values.len())));
-        }
         list.push(AnyChannel::new(*name, FlatSamples::F32(values.clone())));
     }
     let layer = Layer::new(
         (image.width as usize, image.height as usize),
         LayerAttributes::default(),
-        Encoding::FAST_LOSSLESS,
+        Encoding { line_order: LineOrder::Increasing, ..Encoding::FAST_LOSSLESS },
         AnyChannels::sort(list.into()),
     );
     let mut buf = Cursor::new(Vec::new());
-    exr::image::Image::from_layer(layer).write().to_buffered(&mut buf).map_err(|e| Error::new(path, e.to_string()))?;
-    write_atomic(path, &buf.into_inner())
+    exr::image::Image::from_layer(layer).write().non_parallel().to_buffered(&mut buf).map_err(|e| e.to_string())?;
+    Ok(buf.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The same image gives the same EXR bytes every time (a parallel writer stored the
+    /// compressed blocks in the order they finished, so the files differed run to run), and
+    /// the file reads back to the same pixels.
+    #[test]
+    fn exr_bytes_depend_only_on_the_image() {
+        let mut rng = snell_core::sampling::Pcg32::new(1, 2);
+        let mut image = Image::new(512, 384);
+        for p in &mut image.pixels {
+            *p = snell_core::Rgb::new(rng.next_f32(), rng.next_f32() * 4.0, rng.next_f32() * 0.1);
+        }
+        let first = encode(&image, ImageFormat::Exr).unwrap();
+        for _ in 0..6 {
+            assert!(encode(&image, ImageFormat::Exr).unwrap() == first, "the bytes changed");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("noise.exr");
+        write_atomic(&path, &first).unwrap();
+        let back = crate::image_in::read_rgb(&path).unwrap();
+        assert_eq!((back.width, back.height), (512, 384));
+        for (a, b) in back.pixels.iter().zip(&image.pixels) {
+            assert_eq!(a.to_array(), b.to_array());
+        }
+    }
 }
