@@ -288,8 +288,9 @@ pub struct Bvh {
     /// Whether the leaf references in the nodes carry the caller's labels
     /// ([`Accel::relabel_leaves`]) rather than indices into `leaves`.
     relabeled: bool,
-    /// Bounds of everything: tested first, so that a ray that misses a small mesh entirely
-    /// costs one box test (a 2-triangle quad has no node of its own to cull with).
+    /// Bounds of everything: tested first where the root is a leaf, so that a ray that misses
+    /// a small mesh entirely costs one box test (a 2-triangle quad has no node of its own to
+    /// cull with). A root node's own test of its children's boxes culls the same rays.
     root_box: Aabb,
     stats: AccelStats,
     /// Whether this CPU has AVX2: single rays then test a node's eight boxes in one register,
@@ -919,12 +920,13 @@ impl Bvh {
         counter: &impl Counter,
     ) -> bool {
         let inv = ray.d.recip();
-        if self.root_box.slab(ray.o, inv, 0.0, *t_max).is_none() {
-            return false;
-        }
         // A tree that is a single leaf starts at that leaf (one call site of `test`, so that
-        // it is inlined).
+        // it is inlined), once its box is hit; otherwise the root node's test of its children's
+        // boxes culls.
         let root = if self.root_leaf {
+            if self.root_box.slab(ray.o, inv, 0.0, *t_max).is_none() {
+                return false;
+            }
             self.root_ref
         } else if self.nodes.is_empty() {
             return false;
@@ -973,10 +975,10 @@ impl Bvh {
         counter: &impl Counter,
     ) -> bool {
         let inv = ray.d.recip();
-        if self.root_box.slab(ray.o, inv, 0.0, t_max).is_none() {
-            return false;
-        }
         let root = if self.root_leaf {
+            if self.root_box.slab(ray.o, inv, 0.0, t_max).is_none() {
+                return false;
+            }
             self.root_ref
         } else if self.nodes.is_empty() {
             return false;
