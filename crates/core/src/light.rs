@@ -169,6 +169,8 @@ pub enum AreaShape {
         ex: Vec3,
         ey: Vec3,
         normal: Vec3,
+        /// `|ex|·|ey|`, kept rather than recomputed (two square roots) for every sample.
+        area: f32,
     },
 }
 
@@ -359,14 +361,14 @@ impl Light {
                 let cos_max = (1.0 - r2 / d2).max(0.0).sqrt();
                 1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12))
             }
-            AreaShape::Rectangle { corner, ex, ey, normal } => {
+            AreaShape::Rectangle { corner, ex, ey, normal, area } => {
                 let d = q - p;
                 let dist2 = d.length_squared();
                 let cos_l = -normal.dot(d) / dist2.sqrt();
                 if (p - *corner).dot(*normal) <= 0.0 || cos_l.is_nan() || cos_l <= 0.0 {
                     return 0.0;
                 }
-                let area = a.area();
+                let area = *area;
                 match spherical_rectangle(p, *corner, *ex, *ey, area) {
                     Some(r) => (1.0 / r.solid_angle) as f32,
                     None => dist2 / (cos_l * area),
@@ -418,7 +420,7 @@ impl AreaLight {
         match &self.shape {
             AreaShape::Sphere(s) => 4.0 * PI * s.radius * s.radius,
             AreaShape::Triangles { cdf, .. } => *cdf.last().unwrap_or(&0.0),
-            AreaShape::Rectangle { ex, ey, .. } => ex.length() * ey.length(),
+            AreaShape::Rectangle { area, .. } => *area,
         }
     }
 
@@ -444,11 +446,11 @@ impl AreaLight {
                 let pdf = 1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12));
                 Some(LightSample { wi, p: q, n, infinite: false, value: self.emission / pdf, pdf })
             }
-            AreaShape::Rectangle { corner, ex, ey, normal } => {
+            AreaShape::Rectangle { corner, ex, ey, normal, area } => {
                 if (p - *corner).dot(*normal) <= 0.0 {
                     return None; // Behind a one-sided emitter.
                 }
-                let area = self.area();
+                let area = *area;
                 match spherical_rectangle(p, *corner, *ex, *ey, area) {
                     Some(r) => {
                         let q = r.sample(u);
@@ -561,7 +563,7 @@ mod tests {
             object: 0,
             emission: Rgb::ONE,
             samples: 1,
-            shape: AreaShape::Rectangle { corner, ex, ey, normal },
+            shape: AreaShape::Rectangle { corner, ex, ey, normal, area: ex.length() * ey.length() },
         })
     }
 

@@ -173,7 +173,13 @@ fn rectangle(m: &Mesh, tris: &[[Vec3; 3]]) -> Option<AreaShape> {
         && (corner + ex + ey - opposite).length() <= 1e-5 * size
         && n0.normalize_or_zero().dot(n1.normalize_or_zero()) > 0.9999;
     let normal = n0.normalize_or_zero();
-    (rect && normal != Vec3::ZERO && size.is_finite()).then_some(AreaShape::Rectangle { corner, ex, ey, normal })
+    (rect && normal != Vec3::ZERO && size.is_finite()).then_some(AreaShape::Rectangle {
+        corner,
+        ex,
+        ey,
+        normal,
+        area: ex.length() * ey.length(),
+    })
 }
 
 /// The boxes of the parts of triangle `t` inside `part` below and above the plane
