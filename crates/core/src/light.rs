@@ -174,6 +174,13 @@ pub enum AreaShape {
     },
 }
 
+impl AreaShape {
+    /// The rectangle `corner + s·ex + t·ey` emitting towards `normal`, with its area.
+    pub fn rectangle(corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3) -> AreaShape {
+        AreaShape::Rectangle { corner, ex, ey, normal, area: ex.length() * ey.length() }
+    }
+}
+
 /// Below this solid angle (sr) a rectangle is sampled by area: the spherical construction
 /// loses its precision to cancellation, and the two densities agree anyway (pbrt-v4's bound).
 const MIN_SPHERICAL_RECTANGLE: f64 = 3e-4;
@@ -563,7 +570,7 @@ mod tests {
             object: 0,
             emission: Rgb::ONE,
             samples: 1,
-            shape: AreaShape::Rectangle { corner, ex, ey, normal, area: ex.length() * ey.length() },
+            shape: AreaShape::rectangle(corner, ex, ey, normal),
         })
     }
 

@@ -233,17 +233,18 @@ pub fn permute(mut i: u32, n: u32, key: u32) -> u32 {
             break;
         }
     }
-    rem(i.wrapping_add(key), n)
+    div_rem(i.wrapping_add(key), n).1
 }
 
-/// `a % n` (`n > 0`), with a mask where `n` is a power of two (sample counts mostly are),
-/// which spares an integer division on the per-sample path. The same value either way.
+/// `(a / n, a % n)` (`n > 0`), by a shift and a mask where `n` is a power of two (sample
+/// counts mostly are), which spares integer divisions on the per-sample path. The same values
+/// either way.
 #[inline(always)]
-fn rem(a: u32, n: u32) -> u32 {
+fn div_rem(a: u32, n: u32) -> (u32, u32) {
     if n.is_power_of_two() {
-        a & (n - 1)
+        (a >> n.trailing_zeros(), a & (n - 1))
     } else {
-        a % n
+        (a / n, a % n)
     }
 }
 
@@ -254,8 +255,7 @@ pub fn stratified_2d(i: u32, n: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
     let k = (n as f32).sqrt() as u32;
     if k * k == n {
         let cell = permute(i, n, key);
-        let (col, row) =
-            if k.is_power_of_two() { (cell & (k - 1), cell >> k.trailing_zeros()) } else { (cell % k, cell / k) };
+        let (row, col) = div_rem(cell, k);
         Vec2::new((col as f32 + j.x) / k as f32, (row as f32 + j.y) / k as f32)
     } else {
         let row = permute(i, n, key);

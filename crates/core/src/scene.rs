@@ -173,13 +173,7 @@ fn rectangle(m: &Mesh, tris: &[[Vec3; 3]]) -> Option<AreaShape> {
         && (corner + ex + ey - opposite).length() <= 1e-5 * size
         && n0.normalize_or_zero().dot(n1.normalize_or_zero()) > 0.9999;
     let normal = n0.normalize_or_zero();
-    (rect && normal != Vec3::ZERO && size.is_finite()).then_some(AreaShape::Rectangle {
-        corner,
-        ex,
-        ey,
-        normal,
-        area: ex.length() * ey.length(),
-    })
+    (rect && normal != Vec3::ZERO && size.is_finite()).then(|| AreaShape::rectangle(corner, ex, ey, normal))
 }
 
 /// The boxes of the parts of triangle `t` inside `part` below and above the plane
@@ -253,6 +247,19 @@ fn closest_in_blocks(blocks: &[Tri4], r4: &Ray4, mut t_max: f32, counter: &impl 
         }
     }
     rec
+}
+
+/// Whether any triangle among `blocks` is hit with `t < t_max`.
+#[inline(always)]
+fn any_in_blocks(blocks: &[Tri4], r4: &Ray4, t_max: f32) -> bool {
+    blocks.iter().any(|block| block.any(r4, t_max))
+}
+
+/// The ray prepared for the triangle tests of untransformed objects: made when the first of
+/// them is met, then shared by the rest.
+#[inline(always)]
+fn shared_ray4<'a>(shared: &'a mut Option<Ray4>, ray: &Ray) -> &'a Ray4 {
+    shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)))
 }
 
 /// A leaf's block range `a..b` as a leaf label (see [`Accel::relabel_leaves`]): the first
@@ -343,6 +350,25 @@ impl TriData {
         }
     }
 
+    /// The block range of a mesh tested as one leaf (a small mesh, or a tree that is one
+    /// leaf): its blocks are tested straight away, without the structure.
+    #[inline(always)]
+    fn whole_range(&self) -> Option<(u32, u32)> {
+        match self {
+            TriData::Leaves { ranges, .. } => TriData::one_range(ranges),
+            TriData::Single(_) => None,
+        }
+    }
+
+    /// [`TriData::whole_range`] from the leaves' ranges.
+    #[inline(always)]
+    fn one_range(ranges: &[(u32, u32)]) -> Option<(u32, u32)> {
+        match ranges {
+            [range] => Some(*range),
+            _ => None,
+        }
+    }
+
     /// The blocks of leaf `leaf` (an index, or the label that encodes the range).
     #[inline(always)]
     fn leaf_blocks<'a>(blocks: &'a [Tri4], ranges: &[(u32, u32)], labelled: bool, leaf: u32) -> &'a [Tri4] {
@@ -369,10 +395,9 @@ impl TriData {
                     rec = Some(found);
                     Some(found.1.t)
                 };
-                if let [(a, b)] = ranges[..] {
-                    // A single leaf (a small mesh: a quad, a box): its blocks are tested
-                    // straight away. The top level has tested the object's box already (a
-                    // one-object scene has none; the exact block tests decide alone there).
+                if let Some((a, b)) = TriData::one_range(ranges) {
+                    // The top level has tested the object's box already (a one-object scene
+                    // has none; the exact block tests decide alone there).
                     if let Some(t) = leaf(&blocks[a as usize..b as usize], *t_max) {
                         *t_max = t;
                     }
@@ -409,14 +434,13 @@ impl TriData {
     fn any<A: Accel>(&self, accel: &A, ray: &Ray, r4: &Ray4, t_max: f32) -> bool {
         match self {
             TriData::Leaves { blocks, ranges, labelled } => {
-                let leaf = |blocks: &[Tri4], tm: f32| blocks.iter().any(|block| block.any(r4, tm));
-                if let [(a, b)] = ranges[..] {
-                    leaf(&blocks[a as usize..b as usize], t_max)
+                if let Some((a, b)) = TriData::one_range(ranges) {
+                    any_in_blocks(&blocks[a as usize..b as usize], r4, t_max)
                 } else {
                     accel.any_leaf_counted(
                         ray,
                         t_max,
-                        |l, tm| leaf(TriData::leaf_blocks(blocks, ranges, *labelled, l), tm),
+                        |l, tm| any_in_blocks(TriData::leaf_blocks(blocks, ranges, *labelled, l), r4, tm),
                         &NoCount,
                     )
                 }
@@ -439,7 +463,7 @@ fn with_mesh_ray<R>(o: &Object, ray: &Ray, shared: &mut Option<Ray4>, f: impl Fn
             let local = x.ray_to_object(ray);
             f(&local, &Ray4::new(WatertightRay::new(local.o, local.d)))
         }
-        None => f(ray, shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)))),
+        None => f(ray, shared_ray4(shared, ray)),
     }
 }
 
@@ -510,10 +534,8 @@ impl<'s, A: Accel> World<'s, A> {
         let object_blocks = scene
             .objects
             .iter()
-            .map(|o| match (&tris[o.geometry], &o.transform, &scene.geometries[o.geometry]) {
-                (TriData::Leaves { ranges, .. }, None, Geometry::Mesh(_)) if ranges.len() == 1 => {
-                    (o.geometry as u32, ranges[0].0, ranges[0].1)
-                }
+            .map(|o| match (tris[o.geometry].whole_range(), &o.transform) {
+                (Some((a, b)), None) => (o.geometry as u32, a, b),
                 _ => (NOT_DIRECT, 0, 0),
             })
             .collect();
@@ -613,6 +635,14 @@ impl<'s, A: Accel> World<'s, A> {
         (&self.top, &self.blas)
     }
 
+    /// The blocks of object `obj` where the top level's leaf test goes straight to them (an
+    /// untransformed mesh tested as one range of blocks).
+    #[inline(always)]
+    fn direct_blocks(&self, obj: u32) -> Option<&[Tri4]> {
+        let (g, a, b) = self.object_blocks[obj as usize];
+        (g != NOT_DIRECT).then(|| &self.tris[g as usize].blocks()[a as usize..b as usize])
+    }
+
     /// Closest hit with `0 < t < t_max`, with everything shading needs.
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Intersection> {
         let h = self.hit(ray, t_max)?;
@@ -633,11 +663,8 @@ impl<'s, A: Accel> World<'s, A> {
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
             counter.prim();
-            let (g, a, b) = self.object_blocks[obj as usize];
-            if g != NOT_DIRECT {
-                let r4 = shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)));
-                let (tri, h) =
-                    closest_in_blocks(&self.tris[g as usize].blocks()[a as usize..b as usize], r4, tmax, counter)?;
+            if let Some(blocks) = self.direct_blocks(obj) {
+                let (tri, h) = closest_in_blocks(blocks, shared_ray4(&mut shared, ray), tmax, counter)?;
                 best = Some((obj, tri, h.b1, h.b2));
                 return Some(h.t);
             }
@@ -678,33 +705,30 @@ impl<'s, A: Accel> World<'s, A> {
     /// the same hits as [`World::hit`] gives each ray. Packets pay for a single untransformed
     /// mesh, whose leaves are blocks of four triangles; other scenes trace the rays one by one.
     pub fn hit_packet8(&self, rays: &[Ray; 8]) -> [Option<RawHit>; 8] {
-        let single = match self.scene.objects.as_slice() {
-            [o] if o.transform.is_none() => Some(o.geometry),
+        // Packets share a tree: a single untransformed mesh whose blocks sit in leaves of one.
+        // Anything else (a small mesh tested as one range included) traces the rays one by one.
+        let packed = match self.scene.objects.as_slice() {
+            [o] if o.transform.is_none() && self.tris[o.geometry].whole_range().is_none() => {
+                match (&self.tris[o.geometry], &self.blas[o.geometry]) {
+                    (TriData::Leaves { blocks, ranges, labelled }, Some(accel)) => {
+                        Some((accel, blocks, ranges, *labelled))
+                    }
+                    _ => None,
+                }
+            }
             _ => None,
         };
-        let (Some(g), Some(accel)) = (single, single.and_then(|g| self.blas[g].as_ref())) else {
+        let Some((accel, blocks, ranges, labelled)) = packed else {
             return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
         };
-        // A mesh tested as one leaf (a small one) has no tree to share between the rays.
-        let TriData::Leaves { blocks, ranges, labelled } = &self.tris[g] else {
-            return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
-        };
-        if ranges.len() == 1 {
-            return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
-        }
         let r4: [Ray4; 8] = std::array::from_fn(|i| Ray4::new(WatertightRay::new(rays[i].o, rays[i].d)));
         let mut t = [f32::INFINITY; 8];
         let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
-        accel.closest_leaf_packet8(rays, 0xff, &mut t, |leaf, lane, mut tm| {
-            let mut found = None;
-            for block in TriData::leaf_blocks(blocks, ranges, *labelled, leaf) {
-                if let Some((tri, h)) = block.closest(&r4[lane], tm) {
-                    tm = h.t;
-                    found = Some(h.t);
-                    rec[lane] = Some((tri, h));
-                }
-            }
-            found
+        accel.closest_leaf_packet8(rays, 0xff, &mut t, |leaf, lane, tm| {
+            let found =
+                closest_in_blocks(TriData::leaf_blocks(blocks, ranges, labelled, leaf), &r4[lane], tm, &NoCount)?;
+            rec[lane] = Some(found);
+            Some(found.1.t)
         });
         std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: 0, prim, b1: h.b1, b2: h.b2 }))
     }
@@ -713,10 +737,8 @@ impl<'s, A: Accel> World<'s, A> {
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
-            let (g, a, b) = self.object_blocks[obj as usize];
-            if g != NOT_DIRECT {
-                let r4 = shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)));
-                return self.tris[g as usize].blocks()[a as usize..b as usize].iter().any(|block| block.any(r4, tmax));
+            if let Some(blocks) = self.direct_blocks(obj) {
+                return any_in_blocks(blocks, shared_ray4(&mut shared, ray), tmax);
             }
             let o = &self.scene.objects[obj as usize];
             match &self.scene.geometries[o.geometry] {

@@ -27,18 +27,16 @@ pub fn format_for(path: &Path) -> Result<ImageFormat, Error> {
 
 /// Encodes the image in memory.
 pub fn encode(image: &Image, format: ImageFormat) -> Result<Vec<u8>, String> {
-    let mut buf = Cursor::new(Vec::new());
     match format {
         ImageFormat::Png => {
             let img = image::RgbImage::from_raw(image.width, image.height, image.to_srgb8())
                 .ok_or("image size does not match its pixels")?;
+            let mut buf = Cursor::new(Vec::new());
             img.write_to(&mut buf, image::ImageFormat::Png).map_err(|e| e.to_string())?;
+            Ok(buf.into_inner())
         }
-        ImageFormat::Exr => {
-            return encode_exr(image, &[]);
-        }
+        ImageFormat::Exr => encode_exr(image, &[]),
     }
-    Ok(buf.into_inner())
 }
 
 /// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
