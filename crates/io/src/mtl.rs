@@ -145,10 +145,9 @@ mod tests {
     use super::*;
 
     fn load(text: &str) -> Vec<MtlMaterial> {
-        let dir = std::env::temp_dir().join(format!("snell-mtl-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).ok();
-        let p = dir.join(format!("{}.mtl", text.len()));
-        std::fs::write(&p, text).ok();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("test.mtl");
+        std::fs::write(&p, text).unwrap();
         match read(&p) {
             Ok((m, _)) => m,
             Err(e) => panic!("{e}"),
