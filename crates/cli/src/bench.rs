@@ -111,7 +111,7 @@ fn count_closest_packets<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
 fn tiles_of_eight(rays: &[Ray], width: usize, height: usize) -> Vec<Ray> {
     const TW: usize = 4;
     const TH: usize = 2;
-    if rays.len() != width * height || width % TW != 0 || height % TH != 0 {
+    if rays.len() != width * height || !width.is_multiple_of(TW) || !height.is_multiple_of(TH) {
         return rays.to_vec();
     }
     let mut out = Vec::with_capacity(rays.len());

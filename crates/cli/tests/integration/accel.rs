@@ -371,8 +371,8 @@ fn traversal_counts_and_structure_boxes() {
     }
 }
 
-/// Packets of eight rays (coherent camera rays and incoherent random ones) get exactly the hits
-/// that each ray gets alone, for every accelerator (the BVHs' AVX2 packet traversal where the
+/// Packets of eight rays (coherent camera rays, perspective and orthographic, and incoherent
+/// random ones) get exactly the hits that each ray gets alone, for every accelerator (the BVHs' AVX2 packet traversal where the
 /// CPU has it, one by one elsewhere), on a single mesh (where packets are used) and on the
 /// two-level adversarial scene and a small mesh (where they fall back to single rays).
 #[test]
@@ -387,8 +387,17 @@ fn ray_packets_hit_what_single_rays_hit() {
     let camera =
         Camera::look_at(Vec3::new(0.3, 0.4, 3.0), Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 45.0 })
             .unwrap();
-    let coherent: Vec<Ray> = (0..64 * 64)
-        .map(|i| camera.ray(glam::Vec2::new((i % 64) as f32 + 0.5, (i / 64) as f32 + 0.5), 64, 64, glam::Vec2::ZERO))
+    // Camera rays from one point and, orthographic, from a plane of points: packets whose
+    // frustum (AVX2 packet traversal) spans one origin or a range of them.
+    let ortho =
+        Camera::look_at(Vec3::new(0.3, 0.4, 3.0), Vec3::ZERO, Vec3::Y, Projection::Orthographic { half_height: 1.5 })
+            .unwrap();
+    let coherent: Vec<Ray> = [camera, ortho]
+        .iter()
+        .flat_map(|c| {
+            (0..64 * 64)
+                .map(|i| c.ray(glam::Vec2::new((i % 64) as f32 + 0.5, (i / 64) as f32 + 0.5), 64, 64, glam::Vec2::ZERO))
+        })
         .collect();
     // A small mesh (16 triangles or fewer) is tested as one leaf, without its tree.
     let small = Mesh::cuboid(Vec3::splat(-1.2), Vec3::new(1.0, 0.8, 1.1));
