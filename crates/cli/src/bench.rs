@@ -98,7 +98,7 @@ fn count_closest_packets<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
             let mut n = 0;
             for p in packets.by_ref() {
                 let p: &[Ray; 8] = p.try_into().expect("chunks of eight");
-                n += w.hit_packet8(p).iter().filter(|h| h.is_some()).count();
+                n += w.hit_packet8(p, 0xff).iter().filter(|h| h.is_some()).count();
             }
             n + packets.remainder().iter().filter(|r| w.hit(r, f32::INFINITY).is_some()).count()
         })

@@ -701,10 +701,11 @@ impl<'s, A: Accel> World<'s, A> {
         Some(RawHit { t, object, prim, b1, b2 })
     }
 
-    /// Closest hits of eight rays traced as a packet (coherent rays such as camera rays):
-    /// the same hits as [`World::hit`] gives each ray. Packets pay for a single untransformed
-    /// mesh, whose leaves are blocks of four triangles; other scenes trace the rays one by one.
-    pub fn hit_packet8(&self, rays: &[Ray; 8]) -> [Option<RawHit>; 8] {
+    /// Closest hits of the `active` ones of eight rays traced as a packet (coherent rays such
+    /// as camera rays): the same hits as [`World::hit`] gives each ray (None for lanes not
+    /// active). Packets pay for a single untransformed mesh, whose leaves are blocks of four
+    /// triangles; other scenes trace the rays one by one.
+    pub fn hit_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<RawHit>; 8] {
         // Packets share a tree: a single untransformed mesh whose blocks sit in leaves of one.
         // Anything else (a small mesh tested as one range included) traces the rays one by one.
         let packed = match self.scene.objects.as_slice() {
@@ -719,18 +720,27 @@ impl<'s, A: Accel> World<'s, A> {
             _ => None,
         };
         let Some((accel, blocks, ranges, labelled)) = packed else {
-            return std::array::from_fn(|i| self.hit(&rays[i], f32::INFINITY));
+            return std::array::from_fn(|i| {
+                (active & (1 << i) != 0).then(|| self.hit(&rays[i], f32::INFINITY)).flatten()
+            });
         };
         let r4: [Ray4; 8] = std::array::from_fn(|i| Ray4::new(WatertightRay::new(rays[i].o, rays[i].d)));
         let mut t = [f32::INFINITY; 8];
         let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
-        accel.closest_leaf_packet8(rays, 0xff, &mut t, |leaf, lane, tm| {
+        accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lane, tm| {
             let found =
                 closest_in_blocks(TriData::leaf_blocks(blocks, ranges, labelled, leaf), &r4[lane], tm, &NoCount)?;
             rec[lane] = Some(found);
             Some(found.1.t)
         });
         std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: 0, prim, b1: h.b1, b2: h.b2 }))
+    }
+
+    /// [`World::intersect`] for the `active` ones of eight rays, traced as a packet
+    /// ([`World::hit_packet8`]).
+    pub fn intersect_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<Intersection>; 8] {
+        let hits = self.hit_packet8(rays, active);
+        std::array::from_fn(|i| hits[i].map(|h| self.interaction(&rays[i], h.t, h.object, h.prim, h.b1, h.b2)))
     }
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).

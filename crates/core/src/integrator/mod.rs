@@ -9,7 +9,7 @@ pub use whitted::Whitted;
 use crate::accel::Accel;
 use crate::geometry::Ray;
 use crate::sampling::Sampler;
-use crate::scene::World;
+use crate::scene::{Intersection, World};
 use crate::Rgb;
 
 /// Counts of what the ray tree did, summed over the image.
@@ -44,7 +44,16 @@ impl RayStats {
 
 /// Computes the radiance arriving along a camera ray.
 pub trait Integrator: Sync {
-    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, sampler: &mut Sampler, stats: &mut RayStats) -> Rgb;
+    /// `first` is the ray's closest hit, `world.intersect(ray, f32::INFINITY)`, which the
+    /// caller has found already (camera rays are traced in packets).
+    fn radiance<A: Accel>(
+        &self,
+        world: &World<A>,
+        ray: &Ray,
+        first: Option<Intersection>,
+        sampler: &mut Sampler,
+        stats: &mut RayStats,
+    ) -> Rgb;
 }
 
 /// The integrator a render uses, chosen once per render (enum dispatch, no virtual calls).
@@ -55,10 +64,17 @@ pub enum AnyIntegrator {
 }
 
 impl Integrator for AnyIntegrator {
-    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, sampler: &mut Sampler, stats: &mut RayStats) -> Rgb {
+    fn radiance<A: Accel>(
+        &self,
+        world: &World<A>,
+        ray: &Ray,
+        first: Option<Intersection>,
+        sampler: &mut Sampler,
+        stats: &mut RayStats,
+    ) -> Rgb {
         match self {
-            AnyIntegrator::Whitted(w) => w.radiance(world, ray, sampler, stats),
-            AnyIntegrator::Path(p) => p.radiance(world, ray, sampler, stats),
+            AnyIntegrator::Whitted(w) => w.radiance(world, ray, first, sampler, stats),
+            AnyIntegrator::Path(p) => p.radiance(world, ray, first, sampler, stats),
         }
     }
 }

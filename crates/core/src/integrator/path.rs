@@ -16,7 +16,7 @@ use crate::accel::Accel;
 use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
 use crate::material::Frame;
 use crate::sampling::Sampler;
-use crate::scene::World;
+use crate::scene::{Intersection, World};
 use crate::Rgb;
 
 /// Path tracing with next-event estimation and MIS.
@@ -48,7 +48,14 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
 }
 
 impl Integrator for Path {
-    fn radiance<A: Accel>(&self, world: &World<A>, camera_ray: &Ray, rng: &mut Sampler, stats: &mut RayStats) -> Rgb {
+    fn radiance<A: Accel>(
+        &self,
+        world: &World<A>,
+        camera_ray: &Ray,
+        first: Option<Intersection>,
+        rng: &mut Sampler,
+        stats: &mut RayStats,
+    ) -> Rgb {
         let scene = world.scene;
         let mut l = Rgb::ZERO;
         let mut beta = Rgb::ONE;
@@ -59,8 +66,13 @@ impl Integrator for Path {
         let mut prev_p = ray.o;
         let mut eta_scale = 1.0f32;
         let mut depth = 0u32;
+        let mut first = Some(first);
         loop {
-            let Some(hit) = world.intersect(&ray, f32::INFINITY) else {
+            let hit = match first.take() {
+                Some(camera_hit) => camera_hit,
+                None => world.intersect(&ray, f32::INFINITY),
+            };
+            let Some(hit) = hit else {
                 l += beta * scene.background;
                 if let Some((li, env)) = world.environment() {
                     let w = if prev_delta {

@@ -55,16 +55,36 @@ struct Ctx<'a, 'w, A: Accel> {
 }
 
 impl Integrator for Whitted {
-    fn radiance<A: Accel>(&self, world: &World<A>, ray: &Ray, sampler: &mut Sampler, stats: &mut RayStats) -> Rgb {
+    fn radiance<A: Accel>(
+        &self,
+        world: &World<A>,
+        ray: &Ray,
+        first: Option<Intersection>,
+        sampler: &mut Sampler,
+        stats: &mut RayStats,
+    ) -> Rgb {
         // The ray tree stratifies its shadow rays itself, from the independent stream.
         let mut ctx = Ctx { world, rng: sampler.rng(), stats };
-        self.trace(&mut ctx, ray, 0, Rgb::ONE)
+        self.shade(&mut ctx, ray, first, 0, Rgb::ONE)
     }
 }
 
 impl Whitted {
     fn trace<A: Accel>(&self, cx: &mut Ctx<A>, ray: &Ray, depth: u32, throughput: Rgb) -> Rgb {
-        let Some(hit) = cx.world.intersect(ray, f32::INFINITY) else {
+        let hit = cx.world.intersect(ray, f32::INFINITY);
+        self.shade(cx, ray, hit, depth, throughput)
+    }
+
+    /// The radiance along `ray`, whose closest hit is `hit`.
+    fn shade<A: Accel>(
+        &self,
+        cx: &mut Ctx<A>,
+        ray: &Ray,
+        hit: Option<Intersection>,
+        depth: u32,
+        throughput: Rgb,
+    ) -> Rgb {
+        let Some(hit) = hit else {
             return cx.world.escaped(ray.d);
         };
         let scene = cx.world.scene;
