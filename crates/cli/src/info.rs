@@ -90,7 +90,7 @@ pub fn run(args: InfoArgs) -> Result<()> {
     println!("lights       {} ({})", lk.values().sum::<usize>(), if lk.is_empty() { "none".into() } else { list(&lk) });
     let c = &scene.camera;
     let (_, up, fwd) = c.frame();
-    let proj = match c.projection {
+    let proj = match c.projection() {
         Projection::Perspective { fov_y } => format!("perspective, vertical fov {fov_y:.3}°"),
         Projection::ThinLens { fov_y, aperture, focus_distance } => {
             format!("thin lens, vertical fov {fov_y:.3}°, aperture radius {aperture}, focus at {focus_distance}")

@@ -23,7 +23,9 @@ pub struct Camera {
     forward: Vec3,
     right: Vec3,
     up: Vec3,
-    pub projection: Projection,
+    projection: Projection,
+    /// `tan(fov_y / 2)` of the perspective projections (computed once, not per ray).
+    tan_half: f32,
 }
 
 impl Camera {
@@ -35,7 +37,21 @@ impl Camera {
             return None;
         }
         let up = right.cross(forward);
-        Some(Camera { eye, forward, right, up, projection })
+        let tan_half = match projection {
+            Projection::Perspective { fov_y } | Projection::ThinLens { fov_y, .. } => (fov_y.to_radians() * 0.5).tan(),
+            Projection::Orthographic { .. } => 0.0,
+        };
+        Some(Camera { eye, forward, right, up, projection, tan_half })
+    }
+
+    /// How film points map to rays.
+    pub fn projection(&self) -> Projection {
+        self.projection
+    }
+
+    /// Whether [`Camera::ray`] reads its lens sample (only a thin lens does).
+    pub fn has_lens(&self) -> bool {
+        matches!(self.projection, Projection::ThinLens { .. })
     }
 
     /// A camera from its frame as a scene file gives it: the image's `right` and `up` and the
@@ -66,13 +82,13 @@ impl Camera {
         let sx = (2.0 * film.x / width as f32 - 1.0) * aspect;
         let sy = 1.0 - 2.0 * film.y / height as f32;
         match self.projection {
-            Projection::Perspective { fov_y } => {
-                let t = (fov_y.to_radians() * 0.5).tan();
+            Projection::Perspective { .. } => {
+                let t = self.tan_half;
                 let d = self.forward + self.right * (sx * t) + self.up * (sy * t);
                 Ray::new(self.eye, d.normalize())
             }
-            Projection::ThinLens { fov_y, aperture, focus_distance } => {
-                let t = (fov_y.to_radians() * 0.5).tan();
+            Projection::ThinLens { aperture, focus_distance, .. } => {
+                let t = self.tan_half;
                 let d = self.forward + self.right * (sx * t) + self.up * (sy * t);
                 let focus = self.eye + d * focus_distance;
                 let l = concentric_disk(lens) * aperture;

@@ -94,7 +94,7 @@ fn project(cam: &Camera, p: Vec3, w: u32, h: u32) -> Option<Vec2> {
     let d = p - cam.eye;
     let (x, y, z) = (d.dot(right), d.dot(up), d.dot(fwd));
     let aspect = w as f32 / h as f32;
-    let (sx, sy) = match cam.projection {
+    let (sx, sy) = match cam.projection() {
         Projection::Perspective { fov_y } | Projection::ThinLens { fov_y, .. } => {
             if z <= 1e-6 {
                 return None;
@@ -113,7 +113,7 @@ pub fn draw_boxes(img: &mut Image, cam: &Camera, boxes: &[Aabb], colour: Rgb) {
     const EDGES: [(usize, usize); 12] =
         [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)];
     let (_, _, fwd) = cam.frame();
-    let perspective = !matches!(cam.projection, Projection::Orthographic { .. });
+    let perspective = !matches!(cam.projection(), Projection::Orthographic { .. });
     for b in boxes {
         let c = b.corners();
         for (i, j) in EDGES {

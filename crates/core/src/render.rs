@@ -232,7 +232,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
 
 /// Traces the samples of pixel `(x, y)`, handing each one's film position and radiance to
 /// `sink`. Camera rays go eight at a time, as a packet ([`World::intersect_packet8`]), which
-/// finds for each exactly the hit it finds alone.
+/// finds for each exactly the hit it finds alone, where the world traces packets together.
 fn render_pixel<A: Accel, I: Integrator>(
     world: &World<A>,
     integrator: &I,
@@ -244,14 +244,21 @@ fn render_pixel<A: Accel, I: Integrator>(
 ) {
     let pixel = y as u64 * s.width as u64 + x as u64;
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
+    let packets = world.traces_packets();
     for first in (0..s.spp).step_by(8) {
         let n = (s.spp - first).min(8) as usize;
         // Lanes past the pixel's last sample repeat it and are not traced.
-        let samples: [(Sampler, Vec2, Ray); 8] =
+        let mut samples: [(Sampler, Vec2, Ray); 8] =
             std::array::from_fn(|k| camera_sample(world, s, x, y, pixel, key, first + k.min(n - 1) as u32));
-        let rays: [Ray; 8] = std::array::from_fn(|k| samples[k].2);
-        let hits = world.intersect_packet8(&rays, (0xffu32 >> (8 - n)) as u8);
-        for ((mut sampler, film, ray), hit) in samples.into_iter().zip(hits).take(n) {
+        let hits = if packets {
+            let rays: [Ray; 8] = std::array::from_fn(|k| samples[k].2);
+            world.intersect_packet8(&rays, (0xffu32 >> (8 - n)) as u8)
+        } else {
+            [None; 8]
+        };
+        for ((sampler, film, ray), hit) in samples.iter_mut().zip(hits).take(n) {
+            let (film, ray) = (*film, *ray);
+            let hit = if packets { hit } else { world.intersect(&ray, f32::INFINITY) };
             stats.camera += 1;
             let mut sample = Accum::default();
             if s.aovs {
@@ -262,7 +269,7 @@ fn render_pixel<A: Accel, I: Integrator>(
                     sample.depth = hit.t * ray.d.length();
                 }
             }
-            let l = integrator.radiance(world, &ray, hit, &mut sampler, stats);
+            let l = integrator.radiance(world, &ray, hit, sampler, stats);
             // A non-finite sample (NaN from a degenerate configuration) would poison the pixel;
             // it still counts (as black), so that the estimate stays unbiased where it is finite.
             sample.l = if l.is_finite() { l } else { Rgb::ZERO };
@@ -287,7 +294,15 @@ fn camera_sample<A: Accel>(
         SamplerKind::Independent => {
             let rng = sampler.rng();
             let film = stratified_2d(i, s.spp, key, rng);
-            (film, stratified_2d(i, s.spp, key ^ 0x5bd1_e995, rng))
+            // Cameras without a lens ignore the lens sample: its draw only advances the stream
+            // (by the one 2D draw `stratified_2d` makes), without stratifying it.
+            let lens = if world.scene.camera.has_lens() {
+                stratified_2d(i, s.spp, key ^ 0x5bd1_e995, rng)
+            } else {
+                rng.next_2d();
+                Vec2::ZERO
+            };
+            (film, lens)
         }
         SamplerKind::Sobol => (sampler.next_2d(), sampler.next_2d()),
     };
@@ -312,12 +327,22 @@ mod tests {
     use crate::shape::Mesh;
 
     /// Camera rays traced eight at a time (a packet, where the scene is one mesh) give exactly
-    /// the image of each sample traced alone: full packets and a last, partial one (11 samples).
+    /// the image of each sample traced alone: full packets and a last, partial one (11
+    /// samples), through a pinhole, a thin lens and an orthographic camera.
     #[test]
     fn camera_packets_render_what_single_rays_render() {
-        let camera =
-            Camera::look_at(Vec3::new(0.4, 0.3, 3.0), Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 40.0 })
-                .unwrap();
+        for projection in [
+            Projection::Perspective { fov_y: 40.0 },
+            Projection::ThinLens { fov_y: 40.0, aperture: 0.3, focus_distance: 2.5 },
+            Projection::Orthographic { half_height: 1.2 },
+        ] {
+            packets_match_single_rays(
+                Camera::look_at(Vec3::new(0.4, 0.3, 3.0), Vec3::ZERO, Vec3::Y, projection).unwrap(),
+            );
+        }
+    }
+
+    fn packets_match_single_rays(camera: Camera) {
         let scene = Scene {
             geometries: vec![Geometry::Mesh(Mesh::icosphere(3))],
             objects: vec![Object { geometry: 0, transform: None, material: 0, emission: Rgb::ZERO, light_samples: 1 }],
@@ -353,10 +378,10 @@ mod tests {
                     }
                     // The renderer's arithmetic: Σ 1·L, added to an empty sum, over Σ 1.
                     let want = (Rgb::ZERO + sum) / n;
-                    assert_eq!(image.pixels[pixel as usize], want, "pixel ({x}, {y})");
+                    assert_eq!(image.pixels[pixel as usize], want, "{camera:?}: pixel ({x}, {y})");
                 }
             }
-            assert!(lit > 200, "{lit} camera samples hit the sphere");
+            assert!(lit > 200, "{camera:?}: {lit} camera samples hit the sphere");
         });
     }
 }

@@ -701,14 +701,12 @@ impl<'s, A: Accel> World<'s, A> {
         Some(RawHit { t, object, prim, b1, b2 })
     }
 
-    /// Closest hits of the `active` ones of eight rays traced as a packet (coherent rays such
-    /// as camera rays): the same hits as [`World::hit`] gives each ray (None for lanes not
-    /// active). Packets pay for a single untransformed mesh, whose leaves are blocks of four
-    /// triangles; other scenes trace the rays one by one.
-    pub fn hit_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<RawHit>; 8] {
-        // Packets share a tree: a single untransformed mesh whose blocks sit in leaves of one.
-        // Anything else (a small mesh tested as one range included) traces the rays one by one.
-        let packed = match self.scene.objects.as_slice() {
+    /// The tree packets share, with its triangle blocks and leaf ranges: a single untransformed
+    /// mesh whose blocks sit in leaves. Anything else (a small mesh tested as one range
+    /// included) traces packets ray by ray.
+    #[allow(clippy::type_complexity)]
+    fn packet_tree(&self) -> Option<(&A, &[Tri4], &[(u32, u32)], bool)> {
+        match self.scene.objects.as_slice() {
             [o] if o.transform.is_none() && self.tris[o.geometry].whole_range().is_none() => {
                 match (&self.tris[o.geometry], &self.blas[o.geometry]) {
                     (TriData::Leaves { blocks, ranges, labelled }, Some(accel)) => {
@@ -718,8 +716,21 @@ impl<'s, A: Accel> World<'s, A> {
                 }
             }
             _ => None,
-        };
-        let Some((accel, blocks, ranges, labelled)) = packed else {
+        }
+    }
+
+    /// Whether [`World::hit_packet8`] traces its rays together (otherwise it traces them one
+    /// by one, and a caller may as well).
+    pub fn traces_packets(&self) -> bool {
+        self.packet_tree().is_some()
+    }
+
+    /// Closest hits of the `active` ones of eight rays traced as a packet (coherent rays such
+    /// as camera rays): the same hits as [`World::hit`] gives each ray (None for lanes not
+    /// active). Packets pay for a single untransformed mesh, whose leaves are blocks of four
+    /// triangles; other scenes trace the rays one by one.
+    pub fn hit_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<RawHit>; 8] {
+        let Some((accel, blocks, ranges, labelled)) = self.packet_tree() else {
             return std::array::from_fn(|i| {
                 (active & (1 << i) != 0).then(|| self.hit(&rays[i], f32::INFINITY)).flatten()
             });

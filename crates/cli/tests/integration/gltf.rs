@@ -172,7 +172,7 @@ fn cameras_and_punctual_lights() {
     assert!(
         (forward - -Vec3::Z).length() < 1e-6 && (up - Vec3::Y).length() < 1e-6 && (right - Vec3::X).length() < 1e-6
     );
-    assert!(matches!(c.projection, Projection::Perspective { fov_y } if (fov_y - 0.5f32.to_degrees()).abs() < 1e-4));
+    assert!(matches!(c.projection(), Projection::Perspective { fov_y } if (fov_y - 0.5f32.to_degrees()).abs() < 1e-4));
     assert_eq!((l.settings.width, l.settings.height), (1024, 512));
     assert!(l.warnings.iter().any(|w| w.contains("second camera")), "{:?}", l.warnings);
     let lights = &l.scene.lights;

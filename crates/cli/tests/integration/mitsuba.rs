@@ -105,7 +105,7 @@ fn sensor_film_sampler_and_integrator() {
     assert!((cam.forward() - Vec3::Z).length() < 1e-6);
     // 60° across the width of a 2:1 film: 2 atan(tan 30° / 2) vertically.
     let expect = 2.0 * ((30f32).to_radians().tan() / 2.0).atan().to_degrees();
-    match cam.projection {
+    match cam.projection() {
         snell_core::camera::Projection::Perspective { fov_y } => assert!((fov_y - expect).abs() < 1e-3, "{fov_y}"),
         p => panic!("{p:?}"),
     }

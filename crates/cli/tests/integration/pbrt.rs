@@ -109,7 +109,7 @@ WorldBegin
     // pbrt's camera has +x to the right: LookAt down -z would put world -x on the right; the
     // mirror in front of it puts +x there.
     assert!((right - Vec3::X).length() < 1e-6, "{right:?}");
-    match c.projection {
+    match c.projection() {
         // fov is on the shorter axis, here x: the vertical field is wider.
         Projection::ThinLens { fov_y, aperture, focus_distance } => {
             let expect = 2.0 * ((15f32).to_radians().tan() * 2.0).atan().to_degrees();
@@ -127,7 +127,7 @@ WorldBegin
     )])
     .1
     .unwrap();
-    assert_eq!(o.scene.camera.projection, Projection::Orthographic { half_height: 1.0 });
+    assert_eq!(o.scene.camera.projection(), Projection::Orthographic { half_height: 1.0 });
 }
 
 #[test]

@@ -1120,7 +1120,8 @@ mod packet {
 
     impl Frustum {
         /// The frustum of the `active` rays, or None where a direction component changes sign
-        /// across them or is zero in one (its inverse is infinite).
+        /// across them or is zero in one (its inverse is infinite), or where the rays share
+        /// neither their origin nor their direction.
         #[target_feature(enable = "avx2")]
         fn new(r: &Rays8, active: u8) -> Option<Frustum> {
             let active = active as i32;
@@ -1149,19 +1150,25 @@ mod packet {
                 }
                 *neg = m != 0;
             }
+            let (o_lo, o_hi) = (r.o.map(lo), r.o.map(hi));
+            let (inv_lo, inv_hi) = (r.inv.map(lo), r.inv.map(hi));
+            // Intervals of origins times intervals of directions make a tight frustum where one
+            // of them is a point: one origin (a pinhole camera) or one direction (an
+            // orthographic one). Rays from across a lens aimed at one focus point would make a
+            // frustum far wider than the rays, which then enters most of the tree.
+            if o_lo != o_hi && inv_lo != inv_hi {
+                return None;
+            }
             // A positive direction meets a plane nearest from the largest origin and farthest
             // from the smallest; a negative one the other way round.
-            let pick = |a: usize, nearest: bool| {
-                let v = if neg[a] == nearest { lo(r.o[a]) } else { hi(r.o[a]) };
-                _mm256_set1_ps(v)
-            };
+            let pick = |a: usize, nearest: bool| _mm256_set1_ps(if neg[a] == nearest { o_lo[a] } else { o_hi[a] });
             Some(Frustum {
                 near_row: std::array::from_fn(|a| if neg[a] { 3 + a } else { a }),
                 far_row: std::array::from_fn(|a| if neg[a] { a } else { 3 + a }),
                 near_o: std::array::from_fn(|a| pick(a, true)),
                 far_o: std::array::from_fn(|a| pick(a, false)),
-                inv_lo: std::array::from_fn(|a| _mm256_set1_ps(lo(r.inv[a]))),
-                inv_hi: std::array::from_fn(|a| _mm256_set1_ps(hi(r.inv[a]))),
+                inv_lo: inv_lo.map(|v| _mm256_set1_ps(v)),
+                inv_hi: inv_hi.map(|v| _mm256_set1_ps(v)),
             })
         }
 
@@ -1379,8 +1386,8 @@ mod packet {
         use glam::Vec3;
 
         /// Wherever one of a packet's rays enters a box (its own slab test), the frustum test
-        /// enters it too, no later: random packets (one origin, or origins spread as an
-        /// orthographic camera's), random active lanes and `t_max`, random boxes.
+        /// enters it too, no later: random packets (one origin, or one direction from origins
+        /// spread as an orthographic camera's), random active lanes and `t_max`, random boxes.
         #[test]
         fn frustum_enters_every_box_a_ray_enters() {
             if !std::arch::is_x86_feature_detected!("avx2") {
@@ -1390,13 +1397,15 @@ mod packet {
             let mut rng = Pcg32::new(5, 6);
             let mut u = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
             let (mut frusta, mut entered) = (0, 0);
-            for case in 0..4000 {
+            for case in 0..6000 {
+                // One origin (a pinhole camera), one direction (an orthographic one), or neither
+                // (rays from across a lens), which gets no frustum.
+                let (o_spread, d_spread) = [(0.0, 0.05), (u(0.0, 0.5), 0.0), (u(0.01, 0.5), 0.05)][case % 3];
                 let centre = Vec3::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0)).normalize();
-                let spread = if case % 2 == 0 { 0.0 } else { u(0.0, 0.5) };
                 let o0 = Vec3::new(u(-2.0, 2.0), u(-2.0, 2.0), u(-2.0, 2.0));
                 let rays: [Ray; 8] = std::array::from_fn(|_| {
-                    let d = centre + 0.05 * Vec3::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0));
-                    let o = o0 + spread * Vec3::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0));
+                    let d = centre + d_spread * Vec3::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0));
+                    let o = o0 + o_spread * Vec3::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0));
                     Ray::new(o, d.normalize())
                 });
                 let active = (u(1.0, 256.0) as u32).min(255) as u8;
@@ -1408,6 +1417,9 @@ mod packet {
                     let f = Frustum::new(&r, active);
                     (r, f)
                 };
+                if case % 3 == 2 && active.count_ones() > 1 {
+                    assert!(f.is_none(), "case {case}: rays with neither one origin nor one direction");
+                }
                 let Some(f) = f else { continue };
                 frusta += 1;
                 let mut bounds = [[0.0f32; WIDTH]; 6];
