@@ -738,11 +738,18 @@ impl<'s, A: Accel> World<'s, A> {
         let r4: [Ray4; 8] = std::array::from_fn(|i| Ray4::new(WatertightRay::new(rays[i].o, rays[i].d)));
         let mut t = [f32::INFINITY; 8];
         let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
-        accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lane, tm| {
-            let found =
-                closest_in_blocks(TriData::leaf_blocks(blocks, ranges, labelled, leaf), &r4[lane], tm, &NoCount)?;
-            rec[lane] = Some(found);
-            Some(found.1.t)
+        accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lanes, tm| {
+            let blocks = TriData::leaf_blocks(blocks, ranges, labelled, leaf);
+            let (mut m, mut hit) = (lanes, 0);
+            while m != 0 {
+                let lane = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if let Some(found) = closest_in_blocks(blocks, &r4[lane], tm[lane], &NoCount) {
+                    (tm[lane], rec[lane]) = (found.1.t, Some(found));
+                    hit |= 1 << lane;
+                }
+            }
+            hit
         });
         std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: 0, prim, b1: h.b1, b2: h.b2 }))
     }

@@ -1303,20 +1303,11 @@ mod packet {
         rays: &[Ray; 8],
         active: u8,
         t_max: &mut [f32; 8],
-        test: &mut impl FnMut(u32, usize, f32) -> Option<f32>,
+        test: &mut impl FnMut(u32, u8, &mut [f32; 8]) -> u8,
     ) -> u8 {
         let mut hits = 0u8;
-        let mut leaf = |leaf: u32, mask: u32, t_max: &mut [f32; 8], hits: &mut u8| {
-            let mut m = mask;
-            while m != 0 {
-                let lane = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if let Some(t) = test(leaf, lane, t_max[lane]) {
-                    t_max[lane] = t;
-                    *hits |= 1 << lane;
-                }
-            }
-        };
+        let mut leaf =
+            |leaf: u32, mask: u32, t_max: &mut [f32; 8], hits: &mut u8| *hits |= test(leaf, mask as u8, t_max);
         if bvh.root_leaf {
             leaf(bvh.root_ref & !LEAF, active as u32, t_max, &mut hits);
             return hits;
@@ -1466,7 +1457,7 @@ impl Accel for Bvh {
         rays: &[Ray; 8],
         active: u8,
         t_max: &mut [f32; 8],
-        mut test: impl FnMut(u32, usize, f32) -> Option<f32>,
+        mut test: impl FnMut(u32, u8, &mut [f32; 8]) -> u8,
     ) -> u8 {
         #[cfg(target_arch = "x86_64")]
         if self.avx {

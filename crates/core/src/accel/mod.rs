@@ -115,14 +115,15 @@ pub trait Accel: Send + Sync + Sized {
 
     /// Closest hits of a packet of up to eight rays traced together (for coherent rays such
     /// as camera rays): `active` selects the lanes, `t_max` is each lane's bound (updated),
-    /// and `test(leaf, lane, t_max)` tests one lane's ray against a leaf. Returns the mask of
+    /// and `test(leaf, lanes, t_max)` tests the rays of the `lanes` mask against a leaf,
+    /// lowering the `t_max` of those that hit, and returns their mask. Returns the mask of
     /// lanes that hit. The default traces the lanes one by one.
     fn closest_leaf_packet8(
         &self,
         rays: &[Ray; 8],
         active: u8,
         t_max: &mut [f32; 8],
-        test: impl FnMut(u32, usize, f32) -> Option<f32>,
+        test: impl FnMut(u32, u8, &mut [f32; 8]) -> u8,
     ) -> u8 {
         lane_by_lane(self, rays, active, t_max, test)
     }
@@ -140,13 +141,25 @@ pub(crate) fn lane_by_lane<A: Accel>(
     rays: &[Ray; 8],
     active: u8,
     t_max: &mut [f32; 8],
-    mut test: impl FnMut(u32, usize, f32) -> Option<f32>,
+    mut test: impl FnMut(u32, u8, &mut [f32; 8]) -> u8,
 ) -> u8 {
     let mut hits = 0;
     for (lane, ray) in rays.iter().enumerate() {
-        if active & (1 << lane) != 0
-            && accel.closest_leaf_counted(ray, &mut t_max[lane], |leaf, tm| test(leaf, lane, tm), &NoCount)
-        {
+        if active & (1 << lane) == 0 {
+            continue;
+        }
+        let mut bound = t_max[lane];
+        let hit = accel.closest_leaf_counted(
+            ray,
+            &mut bound,
+            |leaf, tm| {
+                t_max[lane] = tm;
+                (test(leaf, 1 << lane, t_max) != 0).then_some(t_max[lane])
+            },
+            &NoCount,
+        );
+        t_max[lane] = bound;
+        if hit {
             hits |= 1 << lane;
         }
     }
