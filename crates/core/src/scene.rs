@@ -735,7 +735,8 @@ impl<'s, A: Accel> World<'s, A> {
                 (active & (1 << i) != 0).then(|| self.hit(&rays[i], f32::INFINITY)).flatten()
             });
         };
-        let r4: [Ray4; 8] = std::array::from_fn(|i| Ray4::new(WatertightRay::new(rays[i].o, rays[i].d)));
+        // Each ray's set-up for the triangle tests, made when it first reaches a leaf.
+        let mut r4: [Option<Ray4>; 8] = [None; 8];
         let mut t = [f32::INFINITY; 8];
         let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
         accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lanes, tm| {
@@ -744,7 +745,9 @@ impl<'s, A: Accel> World<'s, A> {
             while m != 0 {
                 let lane = m.trailing_zeros() as usize;
                 m &= m - 1;
-                if let Some(found) = closest_in_blocks(blocks, &r4[lane], tm[lane], &NoCount) {
+                if let Some(found) =
+                    closest_in_blocks(blocks, shared_ray4(&mut r4[lane], &rays[lane]), tm[lane], &NoCount)
+                {
                     (tm[lane], rec[lane]) = (found.1.t, Some(found));
                     hit |= 1 << lane;
                 }
