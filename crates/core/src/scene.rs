@@ -490,6 +490,8 @@ pub struct World<'s, A: Accel> {
     object_light: Vec<u32>,
     /// The index of the environment light in `lights`, if there is one.
     environment: Option<usize>,
+    /// Whether this CPU has AVX2, for the packets' eight-ray triangle test.
+    avx2: bool,
 }
 
 impl<'s, A: Accel> World<'s, A> {
@@ -561,7 +563,23 @@ impl<'s, A: Accel> World<'s, A> {
             }
         }));
         let environment = lights.iter().position(|l| matches!(l, Light::Environment(_)));
-        World { scene, top, blas, tris, object_blocks, top_by_object, lights, light_cdf, object_light, environment }
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
+        World {
+            scene,
+            top,
+            blas,
+            tris,
+            object_blocks,
+            top_by_object,
+            lights,
+            light_cdf,
+            object_light,
+            environment,
+            avx2,
+        }
     }
 
     /// The environment light and its index in `lights`, if the scene has one.
@@ -739,9 +757,44 @@ impl<'s, A: Accel> World<'s, A> {
         let mut r4: [Option<Ray4>; 8] = [None; 8];
         let mut t = [f32::INFINITY; 8];
         let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
+        // The rays in AVX lanes for the eight-ray triangle test, made at the first leaf that
+        // several rays reach (None inside: the rays permute their axes differently).
+        #[cfg(target_arch = "x86_64")]
+        let mut wide: Option<Option<crate::shape::Rays8>> = None;
         accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lanes, tm| {
             let blocks = TriData::leaf_blocks(blocks, ranges, labelled, leaf);
-            let (mut m, mut hit) = (lanes, 0);
+            let mut hit = 0;
+            #[cfg(target_arch = "x86_64")]
+            if self.avx2 && lanes.count_ones() >= 2 {
+                let wide = wide.get_or_insert_with(|| {
+                    for lane in (0..8).filter(|l| active & (1 << l) != 0) {
+                        shared_ray4(&mut r4[lane], &rays[lane]);
+                    }
+                    let first = r4.iter().flatten().next()?;
+                    let refs: [&Ray4; 8] = std::array::from_fn(|i| r4[i].as_ref().unwrap_or(first));
+                    // SAFETY: `avx2` says the CPU has AVX2.
+                    unsafe { crate::shape::Rays8::new(refs, active) }
+                });
+                if let Some(w) = wide {
+                    for block in blocks {
+                        // SAFETY: `avx2` says the CPU has AVX2.
+                        let (found, undecided) = unsafe { block.closest8(w, lanes, tm, &mut rec) };
+                        hit |= found;
+                        // Rays with an edge function exactly zero: the single-ray test decides.
+                        let mut m = undecided;
+                        while m != 0 {
+                            let lane = m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            if let Some(f) = block.closest(shared_ray4(&mut r4[lane], &rays[lane]), tm[lane]) {
+                                (tm[lane], rec[lane]) = (f.1.t, Some(f));
+                                hit |= 1 << lane;
+                            }
+                        }
+                    }
+                    return hit;
+                }
+            }
+            let mut m = lanes;
             while m != 0 {
                 let lane = m.trailing_zeros() as usize;
                 m &= m - 1;

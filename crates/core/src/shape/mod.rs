@@ -7,5 +7,7 @@ mod triangle;
 
 pub use mesh::{Mesh, MeshError};
 pub use sphere::{intersect_sphere, Sphere};
+#[cfg(target_arch = "x86_64")]
+pub use tri4::Rays8;
 pub use tri4::{Ray4, Tri4};
 pub use triangle::{intersect_triangle, TriHit, WatertightRay};

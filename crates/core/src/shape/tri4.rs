@@ -202,6 +202,159 @@ impl Tri4 {
     }
 }
 
+/// Eight rays that share their watertight permutation (camera rays of one packet do), in AVX
+/// lanes: their origins in sheared-axis order and their shear constants.
+#[cfg(target_arch = "x86_64")]
+pub struct Rays8 {
+    o: [std::arch::x86_64::__m256; 3],
+    s: [std::arch::x86_64::__m256; 3],
+    k: [usize; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Rays8 {
+    /// The rays of the `lanes` mask (other lanes copy the first), or None where two of them
+    /// permute the axes differently.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn new(rays: [&Ray4; 8], lanes: u8) -> Option<Rays8> {
+        use std::arch::x86_64::*;
+        let first = rays[lanes.trailing_zeros() as usize & 7];
+        if (0..8).any(|i| lanes & (1 << i) != 0 && rays[i].k != first.k) {
+            return None;
+        }
+        let lane = |f: &dyn Fn(&Ray4) -> f32| {
+            let v: [f32; 8] = std::array::from_fn(|i| f(if lanes & (1 << i) != 0 { rays[i] } else { first }));
+            // SAFETY: an unaligned load of a local array of eight floats.
+            unsafe { _mm256_loadu_ps(v.as_ptr()) }
+        };
+        Some(Rays8 {
+            o: [lane(&|r| r.o[0]), lane(&|r| r.o[1]), lane(&|r| r.o[2])],
+            s: [lane(&|r| r.s[0]), lane(&|r| r.s[1]), lane(&|r| r.s[2])],
+            k: first.k.map(usize::from),
+        })
+    }
+}
+
+impl Tri4 {
+    /// [`Tri4::closest`] for the rays of the `lanes` mask at once, one triangle at a time with
+    /// the rays in AVX lanes: each lane does the 4-wide test's arithmetic in the same order and
+    /// picks the same triangle (nearest, ties to the lower lane, against the block's incoming
+    /// `t_max`). Lanes that hit lower their `t_max` and take their hit into `best`. Returns the
+    /// lanes that hit and the lanes not decided: where an edge function is exactly zero, which
+    /// the caller must test with [`Tri4::closest`] (as each ray alone would be), from their
+    /// unchanged `t_max` and `best`.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn closest8(
+        &self,
+        r: &Rays8,
+        lanes: u8,
+        t_max: &mut [f32; 8],
+        best: &mut [Option<(u32, TriHit)>; 8],
+    ) -> (u8, u8) {
+        use std::arch::x86_64::*;
+        let [kx, ky, kz] = r.k;
+        let zero = _mm256_setzero_ps();
+        let sign_bit = _mm256_set1_ps(-0.0);
+        // SAFETY: an unaligned load of eight floats.
+        let tmax = unsafe { _mm256_loadu_ps(t_max.as_ptr()) };
+        let (mut bt, mut bdet, mut bv, mut bw, mut bj) =
+            (_mm256_set1_ps(f32::INFINITY), zero, zero, zero, _mm256_setzero_si256());
+        let (mut undecided, mut found) = (0u32, 0u32);
+        for j in 0..4 {
+            if self.id[j] == Tri4::NONE {
+                continue;
+            }
+            let project = |p: &[[f32; 4]; 3]| {
+                let x = _mm256_sub_ps(_mm256_set1_ps(p[kx][j]), r.o[0]);
+                let y = _mm256_sub_ps(_mm256_set1_ps(p[ky][j]), r.o[1]);
+                let z = _mm256_sub_ps(_mm256_set1_ps(p[kz][j]), r.o[2]);
+                (
+                    _mm256_sub_ps(x, _mm256_mul_ps(r.s[0], z)),
+                    _mm256_sub_ps(y, _mm256_mul_ps(r.s[1], z)),
+                    _mm256_mul_ps(r.s[2], z),
+                )
+            };
+            let (ax, ay, az) = project(&self.v[0]);
+            let (bx, by, bz) = project(&self.v[1]);
+            let (cx, cy, cz) = project(&self.v[2]);
+            let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+            let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+            let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+            let any_zero = _mm256_or_ps(
+                _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
+                _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+            );
+            undecided |= _mm256_movemask_ps(any_zero) as u32;
+            let neg = _mm256_or_ps(
+                _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(u, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(v, zero)),
+                _mm256_cmp_ps::<_CMP_LT_OQ>(w, zero),
+            );
+            let pos = _mm256_or_ps(
+                _mm256_or_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(u, zero), _mm256_cmp_ps::<_CMP_GT_OQ>(v, zero)),
+                _mm256_cmp_ps::<_CMP_GT_OQ>(w, zero),
+            );
+            let mut ok = _mm256_andnot_ps(_mm256_and_ps(neg, pos), _mm256_cmp_ps::<_CMP_ORD_Q>(u, u));
+            if _mm256_movemask_ps(ok) as u32 & lanes as u32 == 0 {
+                continue;
+            }
+            let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+            let sign = _mm256_and_ps(det, sign_bit);
+            let abs_det = _mm256_andnot_ps(sign_bit, det);
+            ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero));
+            ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LT_OQ>(abs_det, _mm256_set1_ps(f32::INFINITY)));
+            let ts = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)), _mm256_mul_ps(w, cz));
+            let ts_abs = _mm256_xor_ps(ts, sign);
+            ok = _mm256_andnot_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(ts_abs, zero), ok);
+            ok = _mm256_andnot_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(ts_abs, _mm256_mul_ps(tmax, abs_det)), ok);
+            let t = _mm256_mul_ps(ts, _mm256_div_ps(_mm256_set1_ps(1.0), det));
+            ok = _mm256_and_ps(
+                ok,
+                _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(t, tmax)),
+            );
+            // Nearest so far; a tie keeps the lower triangle, as the 4-wide test's choice does.
+            let take = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LT_OQ>(t, bt));
+            found |= _mm256_movemask_ps(take) as u32;
+            bt = _mm256_blendv_ps(bt, t, take);
+            bdet = _mm256_blendv_ps(bdet, det, take);
+            bv = _mm256_blendv_ps(bv, v, take);
+            bw = _mm256_blendv_ps(bw, w, take);
+            bj = _mm256_blendv_epi8(bj, _mm256_set1_epi32(j as i32), _mm256_castps_si256(take));
+        }
+        let (undecided, found) = (undecided as u8 & lanes, found as u8 & lanes & !(undecided as u8));
+        if found != 0 {
+            let mut out = [[0.0f32; 8]; 4];
+            let mut js = [0i32; 8];
+            // SAFETY: unaligned stores into local arrays of eight elements.
+            unsafe {
+                _mm256_storeu_ps(out[0].as_mut_ptr(), bt);
+                _mm256_storeu_ps(out[1].as_mut_ptr(), bdet);
+                _mm256_storeu_ps(out[2].as_mut_ptr(), bv);
+                _mm256_storeu_ps(out[3].as_mut_ptr(), bw);
+                _mm256_storeu_si256(js.as_mut_ptr().cast(), bj);
+            }
+            let mut m = found;
+            while m != 0 {
+                let lane = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let inv = 1.0 / out[1][lane];
+                t_max[lane] = out[0][lane];
+                best[lane] = Some((
+                    self.id[js[lane] as usize],
+                    TriHit { t: out[0][lane], b1: out[2][lane] * inv, b2: out[3][lane] * inv },
+                ));
+            }
+        }
+        (found, undecided)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -255,6 +408,61 @@ mod tests {
             hits += want.is_some() as usize;
         }
         assert!(hits > 2_000, "too few hits to mean anything: {hits}");
+    }
+
+    /// The eight-ray test gives each ray exactly what the block's own test gives it (the
+    /// undecided rays finished by that test, as the caller does): random blocks, packets of
+    /// rays from one point towards the block (some aimed exactly at a shared vertex, which
+    /// makes edge functions zero), random lanes and bounds.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn eight_ray_test_matches_the_block_test_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2: the eight-ray test is not used on this CPU");
+            return;
+        }
+        let mut rng = Pcg32::new(9, 3);
+        let (mut hits, mut undecided, mut packets) = (0, 0, 0);
+        for case in 0..5_000 {
+            let n = 1 + case % 4;
+            let shared = random_point(&mut rng, 2.0);
+            let tris: Vec<(u32, [Vec3; 3])> = (0..n)
+                .map(|i| (i as u32 * 5 + 2, [shared, random_point(&mut rng, 2.0), random_point(&mut rng, 2.0)]))
+                .collect();
+            let block = Tri4::pack(tris.iter().copied());
+            let o = random_point(&mut rng, 6.0) + Vec3::new(0.0, 0.0, 8.0);
+            let rays: [Ray4; 8] = std::array::from_fn(|i| {
+                let target = if (case + i) % 7 == 0 { shared } else { random_point(&mut rng, 1.5) };
+                Ray4::new(WatertightRay::new(o, (target - o).normalize()))
+            });
+            let lanes = (rng.next_u32() & 0xff) as u8 | 1;
+            let t0: [f32; 8] =
+                std::array::from_fn(|_| if rng.next_f32() < 0.3 { rng.next_f32() * 12.0 } else { f32::INFINITY });
+            // SAFETY: AVX2 was detected above.
+            let Some(r8) = (unsafe { Rays8::new(std::array::from_fn(|i| &rays[i]), lanes) }) else { continue };
+            packets += 1;
+            let (mut tm, mut best) = (t0, [None; 8]);
+            // SAFETY: AVX2 was detected above.
+            let (found, und) = unsafe { block.closest8(&r8, lanes, &mut tm, &mut best) };
+            assert_eq!(found & und, 0);
+            undecided += und.count_ones();
+            for lane in (0..8).filter(|l| und & (1 << l) != 0) {
+                if let Some(f) = block.closest(&rays[lane], tm[lane]) {
+                    (tm[lane], best[lane]) = (f.1.t, Some(f));
+                }
+            }
+            let bits = |h: Option<(u32, TriHit)>| h.map(|(i, h)| (i, h.t.to_bits(), h.b1.to_bits(), h.b2.to_bits()));
+            for lane in 0..8 {
+                let want = if lanes & (1 << lane) != 0 { block.closest(&rays[lane], t0[lane]) } else { None };
+                assert_eq!(bits(best[lane]), bits(want), "case {case}, lane {lane}");
+                assert_eq!(tm[lane].to_bits(), want.map_or(t0[lane], |w| w.1.t).to_bits(), "case {case}, lane {lane}");
+                hits += usize::from(want.is_some());
+            }
+        }
+        assert!(
+            packets > 2_000 && hits > 2_000 && undecided > 20,
+            "{packets} packets, {hits} hits, {undecided} undecided"
+        );
     }
 
     #[test]
