@@ -663,8 +663,7 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// Closest hit with `0 < t < t_max`, with everything shading needs.
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Intersection> {
-        let h = self.hit(ray, t_max)?;
-        Some(self.interaction(ray, h.t, h.object, h.prim, h.b1, h.b2))
+        self.hit(ray, t_max).map(|h| self.interaction(ray, &h))
     }
 
     /// Closest hit with `0 < t < t_max`: only which primitive and where on it.
@@ -781,10 +780,7 @@ impl<'s, A: Accel> World<'s, A> {
                         let (found, undecided) = unsafe { block.closest8(w, lanes, tm, &mut rec) };
                         hit |= found;
                         // Rays with an edge function exactly zero: the single-ray test decides.
-                        let mut m = undecided;
-                        while m != 0 {
-                            let lane = m.trailing_zeros() as usize;
-                            m &= m - 1;
+                        for lane in crate::accel::lanes(undecided.into()) {
                             if let Some(f) = block.closest(shared_ray4(&mut r4[lane], &rays[lane]), tm[lane]) {
                                 (tm[lane], rec[lane]) = (f.1.t, Some(f));
                                 hit |= 1 << lane;
@@ -794,10 +790,7 @@ impl<'s, A: Accel> World<'s, A> {
                     return hit;
                 }
             }
-            let mut m = lanes;
-            while m != 0 {
-                let lane = m.trailing_zeros() as usize;
-                m &= m - 1;
+            for lane in crate::accel::lanes(lanes.into()) {
                 if let Some(found) =
                     closest_in_blocks(blocks, shared_ray4(&mut r4[lane], &rays[lane]), tm[lane], &NoCount)
                 {
@@ -814,7 +807,7 @@ impl<'s, A: Accel> World<'s, A> {
     /// ([`World::hit_packet8`]).
     pub fn intersect_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<Intersection>; 8] {
         let hits = self.hit_packet8(rays, active);
-        std::array::from_fn(|i| hits[i].map(|h| self.interaction(&rays[i], h.t, h.object, h.prim, h.b1, h.b2)))
+        std::array::from_fn(|i| hits[i].map(|h| self.interaction(&rays[i], &h)))
     }
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
@@ -845,7 +838,9 @@ impl<'s, A: Accel> World<'s, A> {
         }
     }
 
-    fn interaction(&self, ray: &Ray, t: f32, obj: u32, prim: u32, b1: f32, b2: f32) -> Intersection {
+    /// Everything shading needs about the hit `h` of `ray`.
+    fn interaction(&self, ray: &Ray, h: &RawHit) -> Intersection {
+        let RawHit { t, object: obj, prim, b1, b2 } = *h;
         let o = &self.scene.objects[obj as usize];
         let (p, mut ng, mut ns, uv) = match &self.scene.geometries[o.geometry] {
             Geometry::Sphere(s) => {

@@ -1100,6 +1100,32 @@ mod packet {
         (tn, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32)
     }
 
+    /// A node's children that a packet enters, `(reference, lanes, entry distance)`, kept in
+    /// order of decreasing distance (the nearest is pushed last and popped first).
+    #[derive(Default)]
+    struct Kids {
+        kids: [(u32, u32, f32); WIDTH],
+        len: usize,
+    }
+
+    impl Kids {
+        /// Inserts a child; among equal distances the later one counts as nearer.
+        #[inline(always)]
+        fn insert(&mut self, kid: (u32, u32, f32)) {
+            let mut p = self.len;
+            while p > 0 && self.kids[p - 1].2 < kid.2 {
+                self.kids[p] = self.kids[p - 1];
+                p -= 1;
+            }
+            self.kids[p] = kid;
+            self.len += 1;
+        }
+
+        fn far_to_near(&self) -> &[(u32, u32, f32)] {
+            &self.kids[..self.len]
+        }
+    }
+
     /// A packet as one frustum: per axis, the range of the rays' origins and of their inverse
     /// directions, which must all have one sign. The box test on these ranges (interval
     /// arithmetic) is conservative: a box that any of the rays enters, the frustum enters.
@@ -1265,30 +1291,18 @@ mod packet {
             // SAFETY: an unaligned load of the eight lanes' t_max.
             let tm = unsafe { _mm256_loadu_ps(t_max.as_ptr()) };
             // Children ordered far to near, so that the nearest is popped first.
-            let mut kids = [(0u32, 0u32, 0.0f32); WIDTH];
-            let mut k = 0;
-            let mut m = hit;
-            while m != 0 {
-                let j = m.trailing_zeros() as usize;
-                m &= m - 1;
+            let mut kids = Kids::default();
+            for j in crate::accel::lanes(hit) {
                 let c = n.child[j];
                 if c == EMPTY {
                     continue;
                 }
                 let lanes = if c & LEAF != 0 { slab8(&n.bounds, j, r, tm).1 & active as u32 } else { active as u32 };
-                if lanes == 0 {
-                    continue;
+                if lanes != 0 {
+                    kids.insert((c, lanes, t[j]));
                 }
-                let d = t[j];
-                let mut p = k;
-                while p > 0 && kids[p - 1].2 < d {
-                    kids[p] = kids[p - 1];
-                    p -= 1;
-                }
-                kids[p] = (c, lanes, d);
-                k += 1;
             }
-            for &kid in &kids[..k] {
+            for &kid in kids.far_to_near() {
                 stack[sp].write(kid);
                 sp += 1;
             }
@@ -1338,8 +1352,7 @@ mod packet {
             let tm = unsafe { _mm256_loadu_ps(t_max.as_ptr()) };
             // Children hit by any lane still active, ordered far to near by the entry distance
             // of their first lane, so that the nearest is popped first.
-            let mut kids = [(0u32, 0u32, 0.0f32); WIDTH];
-            let mut k = 0;
+            let mut kids = Kids::default();
             for j in 0..WIDTH {
                 let c = n.child[j];
                 if c == EMPTY {
@@ -1353,16 +1366,9 @@ mod packet {
                 let mut t = [0.0f32; 8];
                 // SAFETY: an unaligned store into a local array of eight floats.
                 unsafe { _mm256_storeu_ps(t.as_mut_ptr(), tn) };
-                let d = t[m.trailing_zeros() as usize];
-                let mut p = k;
-                while p > 0 && kids[p - 1].2 < d {
-                    kids[p] = kids[p - 1];
-                    p -= 1;
-                }
-                kids[p] = (c, m, d);
-                k += 1;
+                kids.insert((c, m, t[m.trailing_zeros() as usize]));
             }
-            for &(c, m, _) in &kids[..k] {
+            for &(c, m, _) in kids.far_to_near() {
                 stack[sp].write((c, m));
                 sp += 1;
             }

@@ -135,6 +135,19 @@ pub trait Accel: Send + Sync + Sized {
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb>;
 }
 
+/// The set bits of a lane mask, lowest first.
+#[inline(always)]
+pub(crate) fn lanes(mask: u32) -> impl Iterator<Item = usize> {
+    let mut m = mask;
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            lane
+        })
+    })
+}
+
 /// [`Accel::closest_leaf_packet8`] one lane at a time.
 pub(crate) fn lane_by_lane<A: Accel>(
     accel: &A,

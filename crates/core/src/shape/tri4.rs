@@ -339,10 +339,7 @@ impl Tri4 {
                 _mm256_storeu_ps(out[3].as_mut_ptr(), bw);
                 _mm256_storeu_si256(js.as_mut_ptr().cast(), bj);
             }
-            let mut m = found;
-            while m != 0 {
-                let lane = m.trailing_zeros() as usize;
-                m &= m - 1;
+            for lane in crate::accel::lanes(found.into()) {
                 let inv = 1.0 / out[1][lane];
                 t_max[lane] = out[0][lane];
                 best[lane] = Some((
