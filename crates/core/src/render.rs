@@ -247,16 +247,22 @@ fn render_pixel<A: Accel, I: Integrator>(
     let packets = world.traces_packets();
     for first in (0..s.spp).step_by(8) {
         let n = (s.spp - first).min(8) as usize;
-        // Lanes past the pixel's last sample repeat it and are not traced.
-        let mut samples: [(Sampler, Vec2, Ray); 8] =
-            std::array::from_fn(|k| camera_sample(world, s, x, y, pixel, key, first + k.min(n - 1) as u32));
+        let mut samples: [Option<(Sampler, Vec2, Ray)>; 8] =
+            std::array::from_fn(|k| (k < n).then(|| camera_sample(world, s, x, y, pixel, key, first + k as u32)));
         let hits = if packets {
-            let rays: [Ray; 8] = std::array::from_fn(|k| samples[k].2);
+            // Lanes past the pixel's last sample are not traced.
+            let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
+            for (r, sample) in rays.iter_mut().zip(&samples) {
+                if let Some((_, _, ray)) = sample {
+                    *r = *ray;
+                }
+            }
             world.intersect_packet8(&rays, (0xffu32 >> (8 - n)) as u8)
         } else {
             [None; 8]
         };
-        for ((sampler, film, ray), hit) in samples.iter_mut().zip(hits).take(n) {
+        for (slot, hit) in samples.iter_mut().zip(hits) {
+            let Some((sampler, film, ray)) = slot else { break };
             let (film, ray) = (*film, *ray);
             let hit = if packets { hit } else { world.intersect(&ray, f32::INFINITY) };
             stats.camera += 1;
