@@ -282,6 +282,83 @@ const NOT_DIRECT: u32 = u32::MAX;
 /// their tree.
 const SMALL_MESH: usize = 16;
 
+/// A packet's rays prepared for triangle tests: each ray's watertight set-up, made when it
+/// first reaches a leaf, and (AVX2) the rays in AVX lanes for the eight-ray test, made at the
+/// first leaf that several of them reach.
+struct PacketRays<'a> {
+    rays: &'a [Ray; 8],
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    active: u8,
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    avx2: bool,
+    r4: [Option<Ray4>; 8],
+    /// None until made; `Some(None)` where the rays permute their axes differently.
+    #[cfg(target_arch = "x86_64")]
+    wide: Option<Option<crate::shape::Rays8>>,
+}
+
+impl<'a> PacketRays<'a> {
+    fn new(rays: &'a [Ray; 8], active: u8, avx2: bool) -> Self {
+        PacketRays {
+            rays,
+            active,
+            avx2,
+            r4: [None; 8],
+            #[cfg(target_arch = "x86_64")]
+            wide: None,
+        }
+    }
+
+    /// The closest hits among `blocks` of the rays of `lanes`, each with `t < t_max[lane]`:
+    /// lowers `t_max` and records `(triangle, hit)` in `rec` for the lanes that hit, and returns
+    /// them. The same hits as [`closest_in_blocks`] gives each ray alone.
+    fn closest_in_blocks(
+        &mut self,
+        blocks: &[Tri4],
+        lanes: u8,
+        t_max: &mut [f32; 8],
+        rec: &mut [Option<(u32, TriHit)>; 8],
+    ) -> u8 {
+        let mut hit = 0;
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 && lanes.count_ones() >= 2 {
+            let (rays, active, r4) = (self.rays, self.active, &mut self.r4);
+            let wide = self.wide.get_or_insert_with(|| {
+                for lane in crate::accel::lanes(active.into()) {
+                    shared_ray4(&mut r4[lane], &rays[lane]);
+                }
+                let first = r4.iter().flatten().next()?;
+                let refs: [&Ray4; 8] = std::array::from_fn(|i| r4[i].as_ref().unwrap_or(first));
+                // SAFETY: `avx2` says the CPU has AVX2.
+                unsafe { crate::shape::Rays8::new(refs, active) }
+            });
+            if let Some(w) = wide {
+                for block in blocks {
+                    // SAFETY: `avx2` says the CPU has AVX2.
+                    let (found, undecided) = unsafe { block.closest8(w, lanes, t_max, rec) };
+                    hit |= found;
+                    // Rays with an edge function exactly zero: the single-ray test decides.
+                    for lane in crate::accel::lanes(undecided.into()) {
+                        if let Some(f) = block.closest(shared_ray4(&mut r4[lane], &rays[lane]), t_max[lane]) {
+                            (t_max[lane], rec[lane]) = (f.1.t, Some(f));
+                            hit |= 1 << lane;
+                        }
+                    }
+                }
+                return hit;
+            }
+        }
+        for lane in crate::accel::lanes(lanes.into()) {
+            let r4 = shared_ray4(&mut self.r4[lane], &self.rays[lane]);
+            if let Some(found) = closest_in_blocks(blocks, r4, t_max[lane], &NoCount) {
+                (t_max[lane], rec[lane]) = (found.1.t, Some(found));
+                hit |= 1 << lane;
+            }
+        }
+        hit
+    }
+}
+
 /// The triangles of one mesh, laid out for its bottom-level structure: in blocks of four per
 /// leaf ([`Tri4`], tested four at a time) when the structure tests whole leaves, otherwise one
 /// 36-byte record of corners per triangle (no gather through the index buffer either way).
@@ -680,29 +757,9 @@ impl<'s, A: Accel> World<'s, A> {
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
             counter.prim();
-            if let Some(blocks) = self.direct_blocks(obj) {
-                let (tri, h) = closest_in_blocks(blocks, shared_ray4(&mut shared, ray), tmax, counter)?;
-                best = Some((obj, tri, h.b1, h.b2));
-                return Some(h.t);
-            }
-            let o = &self.scene.objects[obj as usize];
-            match &self.scene.geometries[o.geometry] {
-                Geometry::Sphere(s) => {
-                    let local = o.transform.as_ref().map_or(*ray, |x| x.ray_to_object(ray));
-                    intersect_sphere(s, local.o, local.d, tmax).inspect(|_| {
-                        best = Some((obj, 0, 0.0, 0.0));
-                    })
-                }
-                Geometry::Mesh(_) => {
-                    let accel = self.blas[o.geometry].as_ref()?;
-                    let mut tm = tmax;
-                    let (tri, h) = with_mesh_ray(o, ray, &mut shared, |local, r4| {
-                        self.tris[o.geometry].closest(accel, local, r4, &mut tm, counter)
-                    })?;
-                    best = Some((obj, tri, h.b1, h.b2));
-                    Some(tm)
-                }
-            }
+            let (hit_t, prim, b1, b2) = self.closest_in_object(obj, ray, &mut shared, tmax, counter)?;
+            best = Some((obj, prim, b1, b2));
+            Some(hit_t)
         };
         if self.scene.objects.len() == 1 {
             // One object: its own structure culls as well as a top level would.
@@ -716,6 +773,38 @@ impl<'s, A: Accel> World<'s, A> {
         }
         let (object, prim, b1, b2) = best?;
         Some(RawHit { t, object, prim, b1, b2 })
+    }
+
+    /// The closest hit on object `obj` with `t < tmax`: `(t, primitive, b1, b2)`. `shared`
+    /// holds the ray's watertight set-up once made, for every untransformed object it meets.
+    #[inline(always)]
+    fn closest_in_object(
+        &self,
+        obj: u32,
+        ray: &Ray,
+        shared: &mut Option<Ray4>,
+        tmax: f32,
+        counter: &impl Counter,
+    ) -> Option<(f32, u32, f32, f32)> {
+        if let Some(blocks) = self.direct_blocks(obj) {
+            let (tri, h) = closest_in_blocks(blocks, shared_ray4(shared, ray), tmax, counter)?;
+            return Some((h.t, tri, h.b1, h.b2));
+        }
+        let o = &self.scene.objects[obj as usize];
+        match &self.scene.geometries[o.geometry] {
+            Geometry::Sphere(s) => {
+                let local = o.transform.as_ref().map_or(*ray, |x| x.ray_to_object(ray));
+                intersect_sphere(s, local.o, local.d, tmax).map(|t| (t, 0, 0.0, 0.0))
+            }
+            Geometry::Mesh(_) => {
+                let accel = self.blas[o.geometry].as_ref()?;
+                let mut tm = tmax;
+                let (tri, h) = with_mesh_ray(o, ray, shared, |local, r4| {
+                    self.tris[o.geometry].closest(accel, local, r4, &mut tm, counter)
+                })?;
+                Some((tm, tri, h.b1, h.b2))
+            }
+        }
     }
 
     /// The tree packets share, with its triangle blocks and leaf ranges: a single untransformed
@@ -736,71 +825,63 @@ impl<'s, A: Accel> World<'s, A> {
         }
     }
 
+    /// Whether packets traverse the top level together: several objects, each leaf of the top
+    /// level one of them.
+    fn top_packets(&self) -> bool {
+        self.top_by_object && self.scene.objects.len() > 1
+    }
+
     /// Whether [`World::hit_packet8`] traces its rays together (otherwise it traces them one
     /// by one, and a caller may as well).
     pub fn traces_packets(&self) -> bool {
-        self.packet_tree().is_some()
+        self.packet_tree().is_some() || self.top_packets()
     }
 
     /// Closest hits of the `active` ones of eight rays traced as a packet (coherent rays such
     /// as camera rays): the same hits as [`World::hit`] gives each ray (None for lanes not
     /// active). Packets pay for a single untransformed mesh, whose leaves are blocks of four
-    /// triangles; other scenes trace the rays one by one.
+    /// triangles, and for a top level whose leaves are objects (each ray then tests the
+    /// objects it reaches alone); other scenes trace the rays one by one.
     pub fn hit_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<RawHit>; 8] {
-        let Some((accel, blocks, ranges, labelled)) = self.packet_tree() else {
-            return std::array::from_fn(|i| {
-                (active & (1 << i) != 0).then(|| self.hit(&rays[i], f32::INFINITY)).flatten()
-            });
-        };
-        // Each ray's set-up for the triangle tests, made when it first reaches a leaf.
-        let mut r4: [Option<Ray4>; 8] = [None; 8];
+        let mut packet = PacketRays::new(rays, active, self.avx2);
         let mut t = [f32::INFINITY; 8];
+        // Per lane: the hit triangle (primitive) and its object.
         let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
-        // The rays in AVX lanes for the eight-ray triangle test, made at the first leaf that
-        // several rays reach (None inside: the rays permute their axes differently).
-        #[cfg(target_arch = "x86_64")]
-        let mut wide: Option<Option<crate::shape::Rays8>> = None;
-        accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lanes, tm| {
-            let blocks = TriData::leaf_blocks(blocks, ranges, labelled, leaf);
-            let mut hit = 0;
-            #[cfg(target_arch = "x86_64")]
-            if self.avx2 && lanes.count_ones() >= 2 {
-                let wide = wide.get_or_insert_with(|| {
-                    for lane in (0..8).filter(|l| active & (1 << l) != 0) {
-                        shared_ray4(&mut r4[lane], &rays[lane]);
-                    }
-                    let first = r4.iter().flatten().next()?;
-                    let refs: [&Ray4; 8] = std::array::from_fn(|i| r4[i].as_ref().unwrap_or(first));
-                    // SAFETY: `avx2` says the CPU has AVX2.
-                    unsafe { crate::shape::Rays8::new(refs, active) }
-                });
-                if let Some(w) = wide {
-                    for block in blocks {
-                        // SAFETY: `avx2` says the CPU has AVX2.
-                        let (found, undecided) = unsafe { block.closest8(w, lanes, tm, &mut rec) };
-                        hit |= found;
-                        // Rays with an edge function exactly zero: the single-ray test decides.
-                        for lane in crate::accel::lanes(undecided.into()) {
-                            if let Some(f) = block.closest(shared_ray4(&mut r4[lane], &rays[lane]), tm[lane]) {
-                                (tm[lane], rec[lane]) = (f.1.t, Some(f));
+        let mut objs = [0u32; 8];
+        if let Some((accel, blocks, ranges, labelled)) = self.packet_tree() {
+            accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lanes, tm| {
+                packet.closest_in_blocks(TriData::leaf_blocks(blocks, ranges, labelled, leaf), lanes, tm, &mut rec)
+            });
+        } else if self.top_packets() {
+            // The packet traverses the top level together; the rays that reach an object's leaf
+            // test the object (its blocks together, other objects ray by ray).
+            self.top.closest_leaf_packet8(rays, active, &mut t, |obj, lanes, tm| {
+                let hit = match self.direct_blocks(obj) {
+                    Some(blocks) => packet.closest_in_blocks(blocks, lanes, tm, &mut rec),
+                    None => {
+                        let mut hit = 0;
+                        for lane in crate::accel::lanes(lanes.into()) {
+                            let found =
+                                self.closest_in_object(obj, &rays[lane], &mut packet.r4[lane], tm[lane], &NoCount);
+                            if let Some((hit_t, prim, b1, b2)) = found {
+                                (tm[lane], rec[lane]) = (hit_t, Some((prim, TriHit { t: hit_t, b1, b2 })));
                                 hit |= 1 << lane;
                             }
                         }
+                        hit
                     }
-                    return hit;
+                };
+                for lane in crate::accel::lanes(hit.into()) {
+                    objs[lane] = obj;
                 }
-            }
-            for lane in crate::accel::lanes(lanes.into()) {
-                if let Some(found) =
-                    closest_in_blocks(blocks, shared_ray4(&mut r4[lane], &rays[lane]), tm[lane], &NoCount)
-                {
-                    (tm[lane], rec[lane]) = (found.1.t, Some(found));
-                    hit |= 1 << lane;
-                }
-            }
-            hit
-        });
-        std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: 0, prim, b1: h.b1, b2: h.b2 }))
+                hit
+            });
+        } else {
+            return std::array::from_fn(|i| {
+                (active & (1 << i) != 0).then(|| self.hit(&rays[i], f32::INFINITY)).flatten()
+            });
+        }
+        std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: objs[i], prim, b1: h.b1, b2: h.b2 }))
     }
 
     /// [`World::intersect`] for the `active` ones of eight rays, traced as a packet
