@@ -285,35 +285,26 @@ const SMALL_MESH: usize = 16;
 /// A packet's rays prepared for triangle tests: each ray's watertight set-up, made when it
 /// first reaches a leaf, and (AVX2) the rays in AVX lanes for the eight-ray test, made at the
 /// first leaf that several of them reach.
-struct PacketRays<'a> {
-    rays: &'a [Ray; 8],
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    active: u8,
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    avx2: bool,
+#[derive(Default)]
+struct PacketRays {
     r4: [Option<Ray4>; 8],
     /// None until made; `Some(None)` where the rays permute their axes differently.
     #[cfg(target_arch = "x86_64")]
     wide: Option<Option<crate::shape::Rays8>>,
 }
 
-impl<'a> PacketRays<'a> {
-    fn new(rays: &'a [Ray; 8], active: u8, avx2: bool) -> Self {
-        PacketRays {
-            rays,
-            active,
-            avx2,
-            r4: [None; 8],
-            #[cfg(target_arch = "x86_64")]
-            wide: None,
-        }
-    }
-
-    /// The closest hits among `blocks` of the rays of `lanes`, each with `t < t_max[lane]`:
-    /// lowers `t_max` and records `(triangle, hit)` in `rec` for the lanes that hit, and returns
-    /// them. The same hits as [`closest_in_blocks`] gives each ray alone.
+impl PacketRays {
+    /// The closest hits among `blocks` of the rays of `lanes` (of the packet's `active` ones),
+    /// each with `t < t_max[lane]`: lowers `t_max` and records `(triangle, hit)` in `rec` for
+    /// the lanes that hit, and returns them. The same hits as [`closest_in_blocks`] gives each
+    /// ray alone. `avx2`: the CPU has AVX2.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn closest_in_blocks(
         &mut self,
+        rays: &[Ray; 8],
+        active: u8,
+        avx2: bool,
         blocks: &[Tri4],
         lanes: u8,
         t_max: &mut [f32; 8],
@@ -321,8 +312,8 @@ impl<'a> PacketRays<'a> {
     ) -> u8 {
         let mut hit = 0;
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 && lanes.count_ones() >= 2 {
-            let (rays, active, r4) = (self.rays, self.active, &mut self.r4);
+        if avx2 && lanes.count_ones() >= 2 {
+            let r4 = &mut self.r4;
             let wide = self.wide.get_or_insert_with(|| {
                 for lane in crate::accel::lanes(active.into()) {
                     shared_ray4(&mut r4[lane], &rays[lane]);
@@ -348,8 +339,10 @@ impl<'a> PacketRays<'a> {
                 return hit;
             }
         }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (active, avx2);
         for lane in crate::accel::lanes(lanes.into()) {
-            let r4 = shared_ray4(&mut self.r4[lane], &self.rays[lane]);
+            let r4 = shared_ray4(&mut self.r4[lane], &rays[lane]);
             if let Some(found) = closest_in_blocks(blocks, r4, t_max[lane], &NoCount) {
                 (t_max[lane], rec[lane]) = (found.1.t, Some(found));
                 hit |= 1 << lane;
@@ -843,21 +836,22 @@ impl<'s, A: Accel> World<'s, A> {
     /// triangles, and for a top level whose leaves are objects (each ray then tests the
     /// objects it reaches alone); other scenes trace the rays one by one.
     pub fn hit_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<RawHit>; 8] {
-        let mut packet = PacketRays::new(rays, active, self.avx2);
+        let mut packet = PacketRays::default();
         let mut t = [f32::INFINITY; 8];
         // Per lane: the hit triangle (primitive) and its object.
         let mut rec: [Option<(u32, TriHit)>; 8] = [None; 8];
         let mut objs = [0u32; 8];
         if let Some((accel, blocks, ranges, labelled)) = self.packet_tree() {
             accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lanes, tm| {
-                packet.closest_in_blocks(TriData::leaf_blocks(blocks, ranges, labelled, leaf), lanes, tm, &mut rec)
+                let blocks = TriData::leaf_blocks(blocks, ranges, labelled, leaf);
+                packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec)
             });
         } else if self.top_packets() {
             // The packet traverses the top level together; the rays that reach an object's leaf
             // test the object (its blocks together, other objects ray by ray).
             self.top.closest_leaf_packet8(rays, active, &mut t, |obj, lanes, tm| {
                 let hit = match self.direct_blocks(obj) {
-                    Some(blocks) => packet.closest_in_blocks(blocks, lanes, tm, &mut rec),
+                    Some(blocks) => packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec),
                     None => {
                         let mut hit = 0;
                         for lane in crate::accel::lanes(lanes.into()) {
