@@ -562,6 +562,8 @@ pub struct World<'s, A: Accel> {
     environment: Option<usize>,
     /// Whether this CPU has AVX2, for the packets' eight-ray triangle test.
     avx2: bool,
+    /// [`World::traces_packets`], worked out once.
+    packets: bool,
 }
 
 impl<'s, A: Accel> World<'s, A> {
@@ -633,11 +635,8 @@ impl<'s, A: Accel> World<'s, A> {
             }
         }));
         let environment = lights.iter().position(|l| matches!(l, Light::Environment(_)));
-        #[cfg(target_arch = "x86_64")]
-        let avx2 = std::arch::is_x86_feature_detected!("avx2");
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx2 = false;
-        World {
+        let avx2 = crate::accel::has_avx2();
+        let mut world = World {
             scene,
             top,
             blas,
@@ -649,7 +648,10 @@ impl<'s, A: Accel> World<'s, A> {
             object_light,
             environment,
             avx2,
-        }
+            packets: false,
+        };
+        world.packets = world.packet_tree().is_some() || world.top_packets();
+        world
     }
 
     /// The environment light and its index in `lights`, if the scene has one.
@@ -750,9 +752,9 @@ impl<'s, A: Accel> World<'s, A> {
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
             counter.prim();
-            let (hit_t, prim, b1, b2) = self.closest_in_object(obj, ray, &mut shared, tmax, counter)?;
-            best = Some((obj, prim, b1, b2));
-            Some(hit_t)
+            let (prim, h) = self.closest_in_object(obj, ray, &mut shared, tmax, counter)?;
+            best = Some((obj, prim, h.b1, h.b2));
+            Some(h.t)
         };
         if self.scene.objects.len() == 1 {
             // One object: its own structure culls as well as a top level would.
@@ -768,8 +770,9 @@ impl<'s, A: Accel> World<'s, A> {
         Some(RawHit { t, object, prim, b1, b2 })
     }
 
-    /// The closest hit on object `obj` with `t < tmax`: `(t, primitive, b1, b2)`. `shared`
-    /// holds the ray's watertight set-up once made, for every untransformed object it meets.
+    /// The closest hit on object `obj` with `t < tmax`: `(primitive, hit)` (a sphere is
+    /// primitive 0, barycentrics 0). `shared` holds the ray's watertight set-up once made, for
+    /// every untransformed object it meets.
     #[inline(always)]
     fn closest_in_object(
         &self,
@@ -778,16 +781,15 @@ impl<'s, A: Accel> World<'s, A> {
         shared: &mut Option<Ray4>,
         tmax: f32,
         counter: &impl Counter,
-    ) -> Option<(f32, u32, f32, f32)> {
+    ) -> Option<(u32, TriHit)> {
         if let Some(blocks) = self.direct_blocks(obj) {
-            let (tri, h) = closest_in_blocks(blocks, shared_ray4(shared, ray), tmax, counter)?;
-            return Some((h.t, tri, h.b1, h.b2));
+            return closest_in_blocks(blocks, shared_ray4(shared, ray), tmax, counter);
         }
         let o = &self.scene.objects[obj as usize];
         match &self.scene.geometries[o.geometry] {
             Geometry::Sphere(s) => {
                 let local = o.transform.as_ref().map_or(*ray, |x| x.ray_to_object(ray));
-                intersect_sphere(s, local.o, local.d, tmax).map(|t| (t, 0, 0.0, 0.0))
+                intersect_sphere(s, local.o, local.d, tmax).map(|t| (0, TriHit { t, b1: 0.0, b2: 0.0 }))
             }
             Geometry::Mesh(_) => {
                 let accel = self.blas[o.geometry].as_ref()?;
@@ -795,7 +797,8 @@ impl<'s, A: Accel> World<'s, A> {
                 let (tri, h) = with_mesh_ray(o, ray, shared, |local, r4| {
                     self.tris[o.geometry].closest(accel, local, r4, &mut tm, counter)
                 })?;
-                Some((tm, tri, h.b1, h.b2))
+                // The distance the query lowered `tm` to, as this query always reported it.
+                Some((tri, TriHit { t: tm, ..h }))
             }
         }
     }
@@ -827,7 +830,7 @@ impl<'s, A: Accel> World<'s, A> {
     /// Whether [`World::hit_packet8`] traces its rays together (otherwise it traces them one
     /// by one, and a caller may as well).
     pub fn traces_packets(&self) -> bool {
-        self.packet_tree().is_some() || self.top_packets()
+        self.packets
     }
 
     /// Closest hits of the `active` ones of eight rays traced as a packet (coherent rays such
@@ -857,8 +860,8 @@ impl<'s, A: Accel> World<'s, A> {
                         for lane in crate::accel::lanes(lanes.into()) {
                             let found =
                                 self.closest_in_object(obj, &rays[lane], &mut packet.r4[lane], tm[lane], &NoCount);
-                            if let Some((hit_t, prim, b1, b2)) = found {
-                                (tm[lane], rec[lane]) = (hit_t, Some((prim, TriHit { t: hit_t, b1, b2 })));
+                            if let Some(f) = found {
+                                (tm[lane], rec[lane]) = (f.1.t, Some(f));
                                 hit |= 1 << lane;
                             }
                         }

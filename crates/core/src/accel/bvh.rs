@@ -299,7 +299,7 @@ pub struct Bvh {
 }
 
 /// Whether the CPU running this has AVX2 (checked once per build).
-fn has_avx2() -> bool {
+pub(crate) fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
@@ -1445,7 +1445,7 @@ mod packet {
                     let mut t = [0.0f32; 8];
                     // SAFETY: a store into a local array of eight floats.
                     unsafe { _mm256_storeu_ps(t.as_mut_ptr(), *tn) };
-                    for lane in (0..8).filter(|l| m & (1 << l) != 0) {
+                    for lane in crate::accel::lanes(m) {
                         assert!(fte[j] <= t[lane], "case {case}: the frustum enters box {j} after ray {lane}");
                     }
                 }

@@ -222,7 +222,7 @@ impl Rays8 {
     pub unsafe fn new(rays: [&Ray4; 8], lanes: u8) -> Option<Rays8> {
         use std::arch::x86_64::*;
         let first = rays[lanes.trailing_zeros() as usize & 7];
-        if (0..8).any(|i| lanes & (1 << i) != 0 && rays[i].k != first.k) {
+        if crate::accel::lanes(lanes.into()).any(|i| rays[i].k != first.k) {
             return None;
         }
         let lane = |f: &dyn Fn(&Ray4) -> f32| {
