@@ -74,10 +74,13 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Runs `f` once to warm up, then `reps` times; returns the last result and the median seconds.
+/// The previous result is dropped before the clock starts (Embree's benchmark, too, releases a
+/// scene outside its timing).
 fn timed<T>(reps: u32, mut f: impl FnMut() -> T) -> (T, f64) {
     let mut out = f();
     let mut t = Vec::new();
     for _ in 0..reps {
+        drop(out);
         let t0 = Instant::now();
         out = f();
         t.push(t0.elapsed().as_secs_f64());
