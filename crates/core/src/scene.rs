@@ -569,7 +569,10 @@ pub struct World<'s, A: Accel> {
 impl<'s, A: Accel> World<'s, A> {
     pub fn build(scene: &'s Scene, params: &A::Params) -> World<'s, A> {
         use rayon::prelude::*;
-        let mut blas: Vec<Option<A>> = scene
+        // Each geometry's structure and box. A mesh's box is the union of its triangles' boxes
+        // (the box of the vertices its triangles use, as `Mesh::aabb` computes it, without a
+        // second pass over the indices).
+        let (mut blas, geometry_boxes): (Vec<Option<A>>, Vec<Aabb>) = scene
             .geometries
             .par_iter()
             .map(|g| match g {
@@ -578,11 +581,12 @@ impl<'s, A: Accel> World<'s, A> {
                     let clip = |prim: u32, part: &Aabb, axis: usize, pos: f32| {
                         clip_triangle(m.triangle(prim as usize), part, axis, pos)
                     };
-                    Some(A::build_clipped(&boxes, params, &clip))
+                    let bound = boxes.par_iter().copied().reduce(|| Aabb::EMPTY, Aabb::union);
+                    (Some(A::build_clipped(&boxes, params, &clip)), bound)
                 }
-                Geometry::Sphere(_) => None,
+                Geometry::Sphere(s) => (None, s.aabb()),
             })
-            .collect();
+            .unzip();
         let tris: Vec<TriData> = scene
             .geometries
             .iter()
@@ -592,8 +596,6 @@ impl<'s, A: Accel> World<'s, A> {
                 _ => TriData::Single(Vec::new()),
             })
             .collect();
-        // Each geometry's box once (a pass over its vertices), then each object's from it.
-        let geometry_boxes: Vec<Aabb> = scene.geometries.par_iter().map(|g| g.aabb()).collect();
         let boxes: Vec<Aabb> = scene.objects.iter().map(|o| o.place_aabb(geometry_boxes[o.geometry])).collect();
         // One object per top-level leaf: each object's box is tested before its own structure
         // is entered (objects are few; a wasted bottom-level entry costs far more).
