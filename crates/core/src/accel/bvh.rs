@@ -841,11 +841,11 @@ fn visit<const AVX: bool>(
     if rest == 0 {
         return Some(n.child[j0]);
     }
-    prefetch_children(nodes, n, rest);
     let j1 = rest.trailing_zeros() as usize;
     let rest = rest & (rest - 1);
     if rest == 0 {
         let (near, far) = if t[j0] < t[j1] { (j0, j1) } else { (j1, j0) };
+        prefetch_node(nodes, n.child[far]);
         stack[*sp].write((n.child[far], t[far]));
         *sp += 1;
         return Some(n.child[near]);
@@ -869,37 +869,34 @@ fn visit<const AVX: bool>(
         k += 1;
     }
     for j in 0..k - 1 {
+        prefetch_node(nodes, refs[j]);
         stack[*sp].write((refs[j], ts[j]));
         *sp += 1;
     }
     Some(refs[k - 1])
 }
 
-/// Asks the cache for the interior children in `mask`: with several children hit, all but one
-/// wait on the stack, and their nodes arrive while the nearest one is traversed.
+/// Asks the cache for node `c`, a child that waits on the stack while a nearer one is
+/// traversed, so that it has arrived when it is popped. Without a branch: a leaf or empty
+/// reference (at least 2^31, beyond any node index) prefetches the first node instead, which
+/// costs nothing (whether a child is a leaf is close to random, and the branch on it was
+/// mispredicted often).
 #[inline(always)]
-fn prefetch_children(nodes: &[Wide], n: &Wide, mut mask: u32) {
+fn prefetch_node(nodes: &[Wide], c: u32) {
     #[cfg(target_arch = "x86_64")]
-    while mask != 0 {
-        let j = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        let c = n.child[j];
-        if c & LEAF == 0 {
-            if let Some(node) = nodes.get(c as usize) {
-                let p = node as *const Wide as *const i8;
-                // SAFETY: prefetching is a hint with no memory effect; every address lies
-                // inside `node`.
-                unsafe {
-                    use std::arch::x86_64::*;
-                    for line in (0..std::mem::size_of::<Wide>()).step_by(64) {
-                        _mm_prefetch(p.add(line), _MM_HINT_T0);
-                    }
-                }
+    {
+        let i = if (c as usize) < nodes.len() { c as usize } else { 0 };
+        let p = nodes.as_ptr().wrapping_add(i) as *const i8;
+        // SAFETY: prefetching is a hint with no memory effect, valid for any address.
+        unsafe {
+            use std::arch::x86_64::*;
+            for line in (0..std::mem::size_of::<Wide>()).step_by(64) {
+                _mm_prefetch(p.wrapping_add(line), _MM_HINT_T0);
             }
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (nodes, n, mask);
+    let _ = (nodes, c);
 }
 
 impl Bvh {
