@@ -460,26 +460,22 @@ impl TriData {
         let mut rec = None;
         match self {
             TriData::Leaves { blocks, ranges, labelled } => {
+                let mut leaf = |blocks: &[Tri4], tm: f32| {
+                    let found = closest_in_blocks(blocks, r4, tm, counter)?;
+                    rec = Some(found);
+                    Some(found.1.t)
+                };
                 if let Some((a, b)) = TriData::one_range(ranges) {
                     // The top level has tested the object's box already (a one-object scene
                     // has none; the exact block tests decide alone there).
-                    rec = closest_in_blocks(&blocks[a as usize..b as usize], r4, *t_max, counter);
-                    if let Some((_, h)) = rec {
-                        *t_max = h.t;
+                    if let Some(t) = leaf(&blocks[a as usize..b as usize], *t_max) {
+                        *t_max = t;
                     }
                 } else {
-                    // The leaf test is inlined into the traversal: as a call, it saved and
-                    // restored the traversal's vector registers at every leaf.
                     accel.closest_leaf_counted(
                         ray,
                         t_max,
-                        #[inline(always)]
-                        |l, tm| {
-                            let found =
-                                closest_in_blocks(TriData::leaf_blocks(blocks, ranges, *labelled, l), r4, tm, counter)?;
-                            rec = Some(found);
-                            Some(found.1.t)
-                        },
+                        |l, tm| leaf(TriData::leaf_blocks(blocks, ranges, *labelled, l), tm),
                         counter,
                     );
                 }
@@ -514,7 +510,6 @@ impl TriData {
                     accel.any_leaf_counted(
                         ray,
                         t_max,
-                        #[inline(always)]
                         |l, tm| any_in_blocks(TriData::leaf_blocks(blocks, ranges, *labelled, l), r4, tm),
                         &NoCount,
                     )
