@@ -244,27 +244,21 @@ fn render_pixel<A: Accel, I: Integrator>(
 ) {
     let pixel = y as u64 * s.width as u64 + x as u64;
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
-    let packets = world.traces_packets();
     for first in (0..s.spp).step_by(8) {
         let n = (s.spp - first).min(8) as usize;
         let mut samples: [Option<(Sampler, Vec2, Ray)>; 8] =
             std::array::from_fn(|k| (k < n).then(|| camera_sample(world, s, x, y, pixel, key, first + k as u32)));
-        let hits = if packets {
-            // Lanes past the pixel's last sample are not traced.
-            let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
-            for (r, sample) in rays.iter_mut().zip(&samples) {
-                if let Some((_, _, ray)) = sample {
-                    *r = *ray;
-                }
+        // Lanes past the pixel's last sample are not traced.
+        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
+        for (r, sample) in rays.iter_mut().zip(&samples) {
+            if let Some((_, _, ray)) = sample {
+                *r = *ray;
             }
-            world.intersect_packet8(&rays, (0xffu32 >> (8 - n)) as u8)
-        } else {
-            [None; 8]
-        };
+        }
+        let hits = world.intersect_packet8(&rays, (0xffu32 >> (8 - n)) as u8);
         for (slot, hit) in samples.iter_mut().zip(hits) {
             let Some((sampler, film, ray)) = slot else { break };
             let (film, ray) = (*film, *ray);
-            let hit = if packets { hit } else { world.intersect(&ray, f32::INFINITY) };
             stats.camera += 1;
             let mut sample = Accum::default();
             if s.aovs {

@@ -562,7 +562,8 @@ pub struct World<'s, A: Accel> {
     environment: Option<usize>,
     /// Whether this CPU has AVX2, for the packets' eight-ray triangle test.
     avx2: bool,
-    /// [`World::traces_packets`], worked out once.
+    /// Whether [`World::hit_packet8`] traces its rays together (worked out once, when the
+    /// world is built); otherwise it traces them one by one.
     packets: bool,
 }
 
@@ -829,18 +830,17 @@ impl<'s, A: Accel> World<'s, A> {
         self.top_by_object && self.scene.objects.len() > 1
     }
 
-    /// Whether [`World::hit_packet8`] traces its rays together (otherwise it traces them one
-    /// by one, and a caller may as well).
-    pub fn traces_packets(&self) -> bool {
-        self.packets
-    }
-
     /// Closest hits of the `active` ones of eight rays traced as a packet (coherent rays such
     /// as camera rays): the same hits as [`World::hit`] gives each ray (None for lanes not
     /// active). Packets pay for a single untransformed mesh, whose leaves are blocks of four
     /// triangles, and for a top level whose leaves are objects (each ray then tests the
     /// objects it reaches alone); other scenes trace the rays one by one.
     pub fn hit_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<RawHit>; 8] {
+        if !self.packets {
+            return std::array::from_fn(|i| {
+                (active & (1 << i) != 0).then(|| self.hit(&rays[i], f32::INFINITY)).flatten()
+            });
+        }
         let mut packet = PacketRays::default();
         let mut t = [f32::INFINITY; 8];
         // Per lane: the hit triangle (primitive) and its object.
@@ -874,10 +874,6 @@ impl<'s, A: Accel> World<'s, A> {
                     objs[lane] = obj;
                 }
                 hit
-            });
-        } else {
-            return std::array::from_fn(|i| {
-                (active & (1 << i) != 0).then(|| self.hit(&rays[i], f32::INFINITY)).flatten()
             });
         }
         std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: objs[i], prim, b1: h.b1, b2: h.b2 }))

@@ -1383,7 +1383,7 @@ mod packet {
         /// spread as an orthographic camera's), random active lanes and `t_max`, random boxes.
         #[test]
         fn frustum_enters_every_box_a_ray_enters() {
-            if !std::arch::is_x86_feature_detected!("avx2") {
+            if !crate::accel::has_avx2() {
                 eprintln!("no AVX2: the frustum traversal is not used on this CPU");
                 return;
             }

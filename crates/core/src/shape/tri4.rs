@@ -414,7 +414,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn eight_ray_test_matches_the_block_test_bit_for_bit() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
+        if !crate::accel::has_avx2() {
             eprintln!("no AVX2: the eight-ray test is not used on this CPU");
             return;
         }
