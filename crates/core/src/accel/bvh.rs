@@ -472,18 +472,15 @@ impl Builder {
         let ext = cbounds.extent().to_array();
         let scale = ext.map(|e| if e > 0.0 { BINS as f32 / e } else { 0.0 });
         let (lo_v, scale_v) = (Vec3A::from_array(lo), Vec3A::from_array(scale));
-        let mut bins = [Bins::<BINS>::new(), Bins::new(), Bins::new()];
-        let mut bin_n = [[0usize; BINS]; 3];
-        for p in prims.iter() {
-            let (pmin, pmax, c) = p.simd();
-            let f = ((c - lo_v) * scale_v).max(Vec3A::ZERO).min(Vec3A::splat((BINS - 1) as f32));
-            let f = bin_indices(f);
-            for axis in 0..3 {
-                let b = f[axis];
-                bin_n[axis][b] += 1;
-                bins[axis].grow(b, pmin, pmax);
-            }
-        }
+        let bin = |prims: &[PRef]| bin_refs(prims, lo_v, scale_v);
+        // A large node (the root and the first levels, where the other threads would wait)
+        // is binned in parallel pieces, then merged: unions and sums, the same bins.
+        let (bins, bin_n) = if prims.len() >= PARALLEL_BIN_MIN {
+            use rayon::prelude::*;
+            prims.par_chunks(PARALLEL_BIN_MIN / 4).map(bin).reduce_with(merge_bins).unwrap_or_else(|| bin(&[]))
+        } else {
+            bin(prims)
+        };
         let block = self.params.leaf_block;
         #[cfg(target_arch = "x86_64")]
         let swept = if block.is_power_of_two() {
@@ -526,6 +523,42 @@ impl Builder {
             mid
         }
     }
+}
+
+/// Nodes with at least this many primitives are binned in parallel.
+const PARALLEL_BIN_MIN: usize = 128 * 1024;
+
+/// Per axis, the SAH bins of `prims` (box and count) by their centres, for centre bounds
+/// starting at `lo` with `scale` bins per unit.
+fn bin_refs(prims: &[PRef], lo: Vec3A, scale: Vec3A) -> ([Bins<BINS>; 3], [[usize; BINS]; 3]) {
+    let mut bins = [Bins::<BINS>::new(), Bins::new(), Bins::new()];
+    let mut bin_n = [[0usize; BINS]; 3];
+    for p in prims {
+        let (pmin, pmax, c) = p.simd();
+        let f = ((c - lo) * scale).max(Vec3A::ZERO).min(Vec3A::splat((BINS - 1) as f32));
+        let f = bin_indices(f);
+        for axis in 0..3 {
+            let b = f[axis];
+            bin_n[axis][b] += 1;
+            bins[axis].grow(b, pmin, pmax);
+        }
+    }
+    (bins, bin_n)
+}
+
+/// The bins of two sets of references: per axis and bin, the union of the boxes and the sum
+/// of the counts.
+fn merge_bins<const N: usize>(
+    (mut a, mut an): ([Bins<N>; 3], [[usize; N]; 3]),
+    (b, bn): ([Bins<N>; 3], [[usize; N]; 3]),
+) -> ([Bins<N>; 3], [[usize; N]; 3]) {
+    for axis in 0..3 {
+        for k in 0..N {
+            a[axis].grow(k, b[axis].min[k], b[axis].max[k]);
+            an[axis][k] += bn[axis][k];
+        }
+    }
+    (a, an)
 }
 
 /// Bin boxes for the SAH sweeps, as SIMD vectors (a union is one `min` and one `max`).
@@ -1852,6 +1885,38 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Binning in pieces and merging gives the bins of binning everything at once (as the
+    /// parallel binning of large nodes does), whichever way the list is cut.
+    #[test]
+    fn merged_bins_match_binning_all_at_once() {
+        let mut rng = Pcg32::new(13, 4);
+        let mut v = || Vec3A::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+        let refs: Vec<PRef> = (0..5000)
+            .map(|i| {
+                let lo = v() * 10.0;
+                let hi = lo + v();
+                PRef { min: lo.to_array(), id: i, max: hi.to_array(), code: 0 }
+            })
+            .collect();
+        let (lo, scale) = (Vec3A::splat(0.5), Vec3A::splat(BINS as f32 / 10.0));
+        let key = |(b, n): &([Bins<BINS>; 3], [[usize; BINS]; 3])| {
+            let boxes: Vec<[u32; 6]> = b
+                .iter()
+                .flat_map(|b| (0..BINS).map(|k| [b.min[k].to_array(), b.max[k].to_array()]))
+                .map(|[l, h]| [l[0], l[1], l[2], h[0], h[1], h[2]].map(f32::to_bits))
+                .collect();
+            (boxes, *n)
+        };
+        let whole = key(&bin_refs(&refs, lo, scale));
+        for cut in [0, 1, 777, 2500, 4999, 5000] {
+            let (a, b) = refs.split_at(cut);
+            let merged = merge_bins(bin_refs(a, lo, scale), bin_refs(b, lo, scale));
+            assert!(key(&merged) == whole, "cut at {cut}");
+        }
+        let pieces = refs.chunks(300).map(|c| bin_refs(c, lo, scale)).reduce(merge_bins).unwrap();
+        assert!(key(&pieces) == whole, "in pieces of 300");
     }
 
     /// The branch-free partition splits as the predicate says, keeps every element once, and
