@@ -537,6 +537,31 @@ fn with_mesh_ray<R>(o: &Object, ray: &Ray, shared: &mut Option<Ray4>, f: impl Fn
     }
 }
 
+/// The boxes of `m`'s triangles, and their union, in one parallel pass (a second pass to
+/// unite them cost 3 ms of the dragon's build).
+fn triangle_boxes(m: &Mesh) -> (Vec<Aabb>, Aabb) {
+    use rayon::prelude::*;
+    const CHUNK: usize = 4096;
+    let n = m.indices.len();
+    let mut boxes: Vec<Aabb> = Vec::with_capacity(n);
+    let bound = boxes.spare_capacity_mut()[..n]
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let mut u = Aabb::EMPTY;
+            for (k, slot) in chunk.iter_mut().enumerate() {
+                let b = m.triangle_aabb(c * CHUNK + k);
+                u = u.union(b);
+                slot.write(b);
+            }
+            u
+        })
+        .reduce(|| Aabb::EMPTY, Aabb::union);
+    // SAFETY: the chunks cover the first `n` slots, and each slot was written above.
+    unsafe { boxes.set_len(n) };
+    (boxes, bound)
+}
+
 /// A scene with its acceleration structures: one per mesh (bottom level) and one over the
 /// objects (top level). Also the list of all lights, area lights included.
 pub struct World<'s, A: Accel> {
@@ -578,11 +603,10 @@ impl<'s, A: Accel> World<'s, A> {
             .par_iter()
             .map(|g| match g {
                 Geometry::Mesh(m) => {
-                    let boxes: Vec<Aabb> = (0..m.indices.len()).into_par_iter().map(|i| m.triangle_aabb(i)).collect();
+                    let (boxes, bound) = triangle_boxes(m);
                     let clip = |prim: u32, part: &Aabb, axis: usize, pos: f32| {
                         clip_triangle(m.triangle(prim as usize), part, axis, pos)
                     };
-                    let bound = boxes.par_iter().copied().reduce(|| Aabb::EMPTY, Aabb::union);
                     (Some(A::build_clipped(&boxes, params, &clip)), bound)
                 }
                 Geometry::Sphere(s) => (None, s.aabb()),
