@@ -137,7 +137,7 @@ impl Tri4 {
     }
 
     /// The four tests in SSE lanes: `(hit mask, t, det, v, w)`, or `None` when an edge function
-    /// of a lane is exactly zero (the scalar test must decide those).
+    /// of a lane not already rejected is exactly zero (the scalar test must decide those).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     #[allow(clippy::type_complexity)]
@@ -165,16 +165,19 @@ impl Tri4 {
             let zero = _mm_setzero_ps();
             // Unused lanes hold NaN corners: their edge functions are NaN, which no comparison
             // below lets through (NaN is never zero, and its det is not finite).
-            let any_zero = _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)), _mm_cmpeq_ps(w, zero));
-            if _mm_movemask_ps(any_zero) != 0 {
-                return None;
-            }
             let neg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)), _mm_cmplt_ps(w, zero));
             let pos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)), _mm_cmpgt_ps(w, zero));
             // Rejected: both signs among the edge functions (most blocks a ray meets end here).
+            // The scalar test rejects these lanes too, whatever their third edge (it recomputes
+            // only edges that are exactly zero), so they are decided before zero edges are
+            // looked for.
             let mut ok = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_cmpord_ps(u, u));
             if _mm_movemask_ps(ok) == 0 {
                 return Some((0, [0.0; 4], [0.0; 4], [0.0; 4], [0.0; 4]));
+            }
+            let any_zero = _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)), _mm_cmpeq_ps(w, zero));
+            if _mm_movemask_ps(_mm_and_ps(any_zero, ok)) != 0 {
+                return None;
             }
             let det = _mm_add_ps(_mm_add_ps(u, v), w);
             let sign = _mm_and_ps(det, _mm_set1_ps(-0.0));
