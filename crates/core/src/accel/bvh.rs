@@ -477,19 +477,16 @@ impl Builder {
         // is binned in parallel pieces, then merged: unions and sums, the same bins.
         let (bins, bin_n) = if prims.len() >= PARALLEL_BIN_MIN {
             use rayon::prelude::*;
-            prims.par_chunks(PARALLEL_BIN_MIN / 4).map(bin).reduce_with(merge_bins).unwrap_or_else(|| bin(&[]))
+            prims.par_chunks(PARALLEL_BIN_MIN / 4).map(bin).reduce(|| bin(&[]), merge_bins)
         } else {
             bin(prims)
         };
         let block = self.params.leaf_block;
+        let one_by_one = || std::array::from_fn(|axis| sah_sweep(&bins[axis], &bin_n[axis], &bin_n[axis], block));
         #[cfg(target_arch = "x86_64")]
-        let swept = if block.is_power_of_two() {
-            sah_sweep3(&bins, &bin_n, block)
-        } else {
-            std::array::from_fn(|axis| sah_sweep(&bins[axis], &bin_n[axis], &bin_n[axis], block))
-        };
+        let swept = if block.is_power_of_two() { sah_sweep3(&bins, &bin_n, block) } else { one_by_one() };
         #[cfg(not(target_arch = "x86_64"))]
-        let swept: [_; 3] = std::array::from_fn(|axis| sah_sweep(&bins[axis], &bin_n[axis], &bin_n[axis], block));
+        let swept: [_; 3] = one_by_one();
         for axis in 0..3 {
             if ext[axis] <= 0.0 {
                 continue;
