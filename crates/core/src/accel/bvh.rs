@@ -851,11 +851,22 @@ fn collapse(bin: &[Node]) -> (Vec<Wide>, Vec<(u32, u32)>, usize) {
     (nodes, leaves, max_depth)
 }
 
-/// Per-ray data for the 4-wide slab test: origin, inverse direction, and for each axis which
-/// of the `bounds` rows holds the near plane (min for a positive direction, max otherwise).
+/// Rounds the exit distance of a slab test up, so that the test stays conservative: the
+/// distances carry up to about 2 ulp of error each.
+const EXIT_ROUNDING: f32 = 1.0 + 4.0 * f32::EPSILON;
+
+/// Per-ray data for the wide slab test: origin, inverse direction, the inverse direction
+/// rounded up for exit distances, and for each axis which of the `bounds` rows holds the near
+/// plane (min for a positive direction, max otherwise).
 struct RayPre {
     o: [f32; 3],
     inv: [f32; 3],
+    /// `inv · EXIT_ROUNDING`: the exit distances come out rounded up without a multiply of
+    /// their own.
+    inv_exit: [f32; 3],
+    /// Every `inv` and `inv_exit` is finite, so that no slab distance is NaN (the ray has no
+    /// zero direction component): the test may then take minima and maxima as integers.
+    finite: bool,
     near: [usize; 3],
     far: [usize; 3],
 }
@@ -864,40 +875,85 @@ impl RayPre {
     #[inline]
     fn new(ray: &Ray, inv: glam::Vec3) -> RayPre {
         let (nx, ny, nz) = ((inv.x < 0.0) as usize * 3, (inv.y < 0.0) as usize * 3, (inv.z < 0.0) as usize * 3);
-        RayPre { o: ray.o.to_array(), inv: inv.to_array(), near: [nx, 1 + ny, 2 + nz], far: [3 - nx, 4 - ny, 5 - nz] }
+        let inv_exit = inv * EXIT_ROUNDING;
+        RayPre {
+            o: ray.o.to_array(),
+            inv: inv.to_array(),
+            inv_exit: inv_exit.to_array(),
+            finite: inv_exit.is_finite(),
+            near: [nx, 1 + ny, 2 + nz],
+            far: [3 - nx, 4 - ny, 5 - nz],
+        }
     }
 }
 
+/// The float `x` as an integer key. Keys of non-negative floats order as the floats do, and
+/// the keys of negative floats (`-0.0` and the NaN that `0 · inf` gives on x86 included) are
+/// below all of those.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn key(x: f32) -> i32 {
+    x.to_bits() as i32
+}
+
 /// Slab test of one ray against the boxes of `n` within `[0, t_max]`: entry distances and a
-/// bit mask of the boxes hit. Same semantics as [`Aabb::slab`]: NaN from `0 · inf` is ignored,
+/// bit mask of the boxes hit. Conservative like [`Aabb::slab`]: NaN from `0 · inf` is ignored,
 /// empty boxes never hit, and the exit distance is rounded up by a few ulps.
+///
+/// The entry distance is the maximum of the three near-plane distances and 0, the exit
+/// distance the minimum of the far-plane distances (rounded up through `inv_exit`) and
+/// `t_max · EXIT_ROUNDING`. For a ray without a zero direction component (`finite`) they are
+/// taken as integer maxima and minima of the floats' bits, which cost a cycle where float ones
+/// cost several on the path from one node to the next: the entry maximum includes 0, so it is
+/// exact (a negative distance never wins, as with floats), and an exit minimum below zero
+/// keeps a negative key and rejects the box, as it must (an exit of exactly `-0.0` with entry
+/// `+0.0` touches the box only at `t = 0`, where no hit counts). Rays with a zero component
+/// take float maxima and minima, which ignore the NaN of an origin on a plane.
 #[inline(always)]
 fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
     let mut out = [0.0f32; WIDTH];
     let mut mask = 0;
+    let t_exit = t_max * EXIT_ROUNDING;
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: SSE is part of the x86_64 baseline; loads are unaligned-safe (`loadu`) from
+    // SAFETY: SSE2 is part of the x86_64 baseline; loads are unaligned-safe (`loadu`) from
     // 16-byte runs inside `n`'s rows, and stores go to 16-byte runs of a local array.
     unsafe {
         use std::arch::x86_64::*;
         let b = &n.bounds;
-        let scale = _mm_set1_ps(1.0 + 4.0 * f32::EPSILON);
+        let (i, f) = (_mm_castps_si128, _mm_castsi128_ps);
+        // Integer max and min in SSE2 (which lacks pmaxsd): select by a comparison.
+        let imax = |a: __m128, c: __m128| {
+            let gt = _mm_cmpgt_epi32(i(a), i(c));
+            f(_mm_or_si128(_mm_and_si128(gt, i(a)), _mm_andnot_si128(gt, i(c))))
+        };
+        let imin = |a: __m128, c: __m128| {
+            let gt = _mm_cmpgt_epi32(i(a), i(c));
+            f(_mm_or_si128(_mm_and_si128(gt, i(c)), _mm_andnot_si128(gt, i(a))))
+        };
         // Four children at a time.
         for h in (0..WIDTH).step_by(4) {
             let mut tn = _mm_setzero_ps();
-            let mut tf = _mm_set1_ps(t_max);
+            let mut tf = _mm_set1_ps(t_exit);
             for a in 0..3 {
                 let o = _mm_set1_ps(r.o[a]);
-                let inv = _mm_set1_ps(r.inv[a]);
-                let t0 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(b[r.near[a]][h..].as_ptr()), o), inv);
-                let t1 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(b[r.far[a]][h..].as_ptr()), o), inv);
-                // maxps/minps return the second operand when either is NaN: keep the running
-                // value second so that NaN slab distances are ignored.
-                tn = _mm_max_ps(t0, tn);
-                tf = _mm_min_ps(t1, tf);
+                let t0 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(b[r.near[a]][h..].as_ptr()), o), _mm_set1_ps(r.inv[a]));
+                let t1 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(b[r.far[a]][h..].as_ptr()), o), _mm_set1_ps(r.inv_exit[a]));
+                if r.finite {
+                    tn = imax(t0, tn);
+                    tf = imin(t1, tf);
+                } else {
+                    // maxps/minps return the second operand when either is NaN: keep the
+                    // running value second so that NaN slab distances are ignored.
+                    tn = _mm_max_ps(t0, tn);
+                    tf = _mm_min_ps(t1, tf);
+                }
             }
-            let tf = _mm_mul_ps(tf, scale);
-            mask |= (_mm_movemask_ps(_mm_cmple_ps(tn, tf)) as u32) << h;
+            let hit = if r.finite {
+                _mm_movemask_ps(f(_mm_cmpgt_epi32(i(tn), i(tf)))) ^ 0xf
+            } else {
+                _mm_movemask_ps(_mm_cmple_ps(tn, tf))
+            };
+            mask |= (hit as u32) << h;
             _mm_storeu_ps(out[h..].as_mut_ptr(), tn);
         }
     }
@@ -906,14 +962,19 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
         let b = &n.bounds;
         for j in 0..WIDTH {
             let mut tn = 0.0f32;
-            let mut tf = t_max;
+            let mut tf = t_exit;
             for a in 0..3 {
                 let t0 = (b[r.near[a]][j] - r.o[a]) * r.inv[a];
-                let t1 = (b[r.far[a]][j] - r.o[a]) * r.inv[a];
-                tn = if t0 > tn { t0 } else { tn };
-                tf = if t1 < tf { t1 } else { tf };
+                let t1 = (b[r.far[a]][j] - r.o[a]) * r.inv_exit[a];
+                if r.finite {
+                    tn = if key(t0) > key(tn) { t0 } else { tn };
+                    tf = if key(t1) < key(tf) { t1 } else { tf };
+                } else {
+                    tn = if t0 > tn { t0 } else { tn };
+                    tf = if t1 < tf { t1 } else { tf };
+                }
             }
-            if tn <= tf * (1.0 + 4.0 * f32::EPSILON) {
+            if if r.finite { key(tn) <= key(tf) } else { tn <= tf } {
                 mask |= 1 << j;
             }
             out[j] = tn;
@@ -930,21 +991,50 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
 fn slab_avx(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
     use std::arch::x86_64::*;
     const { assert!(WIDTH == 8, "one AVX register holds eight children") };
+    if !r.finite {
+        return slab_avx_float(n, r, t_max);
+    }
     let b = &n.bounds;
-    let mut tn = _mm256_setzero_ps();
-    let mut tf = _mm256_set1_ps(t_max);
+    let (i, f) = (_mm256_castps_si256, _mm256_castsi256_ps);
+    let mut tn = _mm256_setzero_si256();
+    let mut tf = i(_mm256_set1_ps(t_max * EXIT_ROUNDING));
     for a in 0..3 {
         let o = _mm256_set1_ps(r.o[a]);
-        let inv = _mm256_set1_ps(r.inv[a]);
         // SAFETY: unaligned loads of 8-float rows of `n`.
         let (lo, hi) = unsafe { (_mm256_loadu_ps(b[r.near[a]].as_ptr()), _mm256_loadu_ps(b[r.far[a]].as_ptr())) };
-        let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-        let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, o), inv);
+        let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, o), _mm256_set1_ps(r.inv[a]));
+        let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, o), _mm256_set1_ps(r.inv_exit[a]));
+        tn = _mm256_max_epi32(i(t0), tn);
+        tf = _mm256_min_epi32(i(t1), tf);
+    }
+    let mask = _mm256_movemask_ps(f(_mm256_cmpgt_epi32(tn, tf))) as u32 ^ 0xff;
+    let mut out = [0.0f32; WIDTH];
+    // SAFETY: an unaligned store into a local array of eight floats.
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), f(tn)) };
+    (out, mask)
+}
+
+/// [`slab_avx`] for rays with a zero direction component: float maxima and minima, which
+/// ignore NaN distances (kept out of the hot path).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[cold]
+#[inline(never)]
+fn slab_avx_float(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
+    use std::arch::x86_64::*;
+    let b = &n.bounds;
+    let mut tn = _mm256_setzero_ps();
+    let mut tf = _mm256_set1_ps(t_max * EXIT_ROUNDING);
+    for a in 0..3 {
+        let o = _mm256_set1_ps(r.o[a]);
+        // SAFETY: unaligned loads of 8-float rows of `n`.
+        let (lo, hi) = unsafe { (_mm256_loadu_ps(b[r.near[a]].as_ptr()), _mm256_loadu_ps(b[r.far[a]].as_ptr())) };
+        let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, o), _mm256_set1_ps(r.inv[a]));
+        let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, o), _mm256_set1_ps(r.inv_exit[a]));
         // As in `slab`: the running value second, so that NaN distances are ignored.
         tn = _mm256_max_ps(t0, tn);
         tf = _mm256_min_ps(t1, tf);
     }
-    let tf = _mm256_mul_ps(tf, _mm256_set1_ps(1.0 + 4.0 * f32::EPSILON));
     let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
     let mut out = [0.0f32; WIDTH];
     // SAFETY: an unaligned store into a local array of eight floats.
@@ -1968,6 +2058,85 @@ mod tests {
             }
         }
         assert!(with_plane > 10_000, "most cases have a plane ({with_plane})");
+    }
+
+    /// The wide slab test is conservative: every child box that `Aabb::slab` enters within
+    /// `(0, t_max]` it enters too, at the same entry distance, and it never enters an empty
+    /// slot; the AVX2 test gives the same distances and mask. Random boxes (some flat, some
+    /// with a plane through the ray's origin), rays with and without a zero direction
+    /// component (the integer and the float extremes), finite and infinite `t_max`.
+    #[test]
+    fn wide_slab_test_enters_every_box_the_exact_test_enters() {
+        let mut rng = Pcg32::new(5, 9);
+        let (mut entered, mut float_path) = (0, 0);
+        for case in 0..40_000 {
+            let mut v = || glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let kids = 1 + case % WIDTH;
+            let mut boxes: Vec<Aabb> = (0..kids)
+                .map(|_| {
+                    let c = v() * 4.0 - glam::Vec3::splat(2.0);
+                    Aabb::EMPTY.grow(c).grow(c + v())
+                })
+                .collect();
+            if case % 3 == 0 {
+                boxes[0].max.y = boxes[0].min.y; // flat
+            }
+            let mut o = v() * 6.0 - glam::Vec3::splat(3.0);
+            // Mostly aimed at a box, so that many are entered.
+            let aim = boxes[case % kids].center() + (v() - glam::Vec3::splat(0.5)) * 0.8;
+            let mut d = if case % 4 == 3 { v() - glam::Vec3::splat(0.5) } else { aim - o };
+            match case % 7 {
+                0 => {
+                    d.x = 0.0;
+                    o.x = if case % 2 == 0 { boxes[0].min.x } else { boxes[0].max.x };
+                }
+                1 => o.z = boxes[case % kids].max.z,
+                2 => d.y = -0.0,
+                // Through a corner: entry and exit meet, and only the rounding keeps the box.
+                3 => d = boxes[case % kids].max - o,
+                // Leaving a box through its face: its exit distance is -0.0.
+                4 => {
+                    o.z = boxes[case % kids].min.z;
+                    d.z = -d.z.abs();
+                }
+                _ => {}
+            }
+            let t_max = if case % 2 == 0 { f32::INFINITY } else { rng.next_f32() * 5.0 };
+            let mut n = Wide::EMPTY;
+            for (j, b) in boxes.iter().enumerate() {
+                for a in 0..3 {
+                    n.bounds[a][j] = b.min[a];
+                    n.bounds[3 + a][j] = b.max[a];
+                }
+            }
+            let inv = d.recip();
+            let r = RayPre::new(&Ray::new(o, d), inv);
+            float_path += usize::from(!r.finite);
+            let (t, mask) = slab(&n, &r, t_max);
+            for (j, &tj) in t.iter().enumerate() {
+                // Boxes the ray meets at some t > 0 (a box touched only at t = 0 can hold no
+                // hit, and the integer test may leave it out).
+                let exact = boxes
+                    .get(j)
+                    .filter(|b| b.slab(o, inv, f32::MIN_POSITIVE, t_max).is_some())
+                    .and_then(|b| b.slab(o, inv, 0.0, t_max));
+                if let Some(te) = exact {
+                    assert!(mask & (1 << j) != 0, "case {case}: box {j} missed");
+                    assert_eq!(tj, te, "case {case}: box {j}");
+                    entered += 1;
+                }
+                if j >= kids {
+                    assert_eq!(mask & (1 << j), 0, "case {case}: empty slot {j} entered");
+                }
+            }
+            #[cfg(target_arch = "x86_64")]
+            if has_avx2() {
+                // SAFETY: AVX2 was detected.
+                let (ta, ma) = unsafe { slab_avx(&n, &r, t_max) };
+                assert_eq!((ta.map(f32::to_bits), ma), (t.map(f32::to_bits), mask), "case {case}");
+            }
+        }
+        assert!(entered > 8_000 && float_path > 4_000, "{entered} boxes entered, {float_path} float tests");
     }
 
     /// The AVX2 traversal visits the same leaves in the same order, with the same distances,
