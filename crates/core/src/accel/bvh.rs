@@ -1468,14 +1468,31 @@ mod packet {
                 };
                 let near = _mm256_sub_ps(near, self.near_o[a]);
                 let far = _mm256_sub_ps(far, self.far_o[a]);
-                let near = _mm256_min_ps(_mm256_mul_ps(near, self.inv_lo[a]), _mm256_mul_ps(near, self.inv_hi[a]));
-                let far = _mm256_max_ps(_mm256_mul_ps(far, self.inv_lo[a]), _mm256_mul_ps(far, self.inv_hi[a]));
-                tn = _mm256_max_ps(tn, near);
-                tf = _mm256_min_ps(tf, far);
+                // The inverse directions are finite (`Frustum::new`), so no distance is NaN,
+                // and maxima and minima are taken on the floats' bits as in the single-ray
+                // `slab_avx`: the entry's includes 0, and an extreme below zero stays below
+                // zero and rejects the box.
+                let near = imin(_mm256_mul_ps(near, self.inv_lo[a]), _mm256_mul_ps(near, self.inv_hi[a]));
+                let far = imax(_mm256_mul_ps(far, self.inv_lo[a]), _mm256_mul_ps(far, self.inv_hi[a]));
+                tn = imax(tn, near);
+                tf = imin(tf, far);
             }
-            let tf = _mm256_mul_ps(tf, _mm256_set1_ps(1.0 + 4.0 * f32::EPSILON));
-            (tn, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32)
+            let tf = _mm256_mul_ps(tf, _mm256_set1_ps(super::EXIT_ROUNDING));
+            let outside = _mm256_cmpgt_epi32(_mm256_castps_si256(tn), _mm256_castps_si256(tf));
+            (tn, _mm256_movemask_ps(_mm256_castsi256_ps(outside)) as u32 ^ 0xff)
         }
+    }
+
+    /// The lane-wise maximum of the floats' bits as integers.
+    #[target_feature(enable = "avx2")]
+    fn imax(a: __m256, b: __m256) -> __m256 {
+        _mm256_castsi256_ps(_mm256_max_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
+    }
+
+    /// The lane-wise minimum of the floats' bits as integers.
+    #[target_feature(enable = "avx2")]
+    fn imin(a: __m256, b: __m256) -> __m256 {
+        _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
     }
 
     /// The smallest of the eight lanes.
