@@ -7,7 +7,6 @@ use rayon::prelude::*;
 
 use crate::accel::Accel;
 use crate::filter::Filter;
-use crate::geometry::Ray;
 use crate::image::Image;
 use crate::integrator::{Integrator, RayStats};
 use crate::sampling::{stratified_2d, Sampler, SamplerKind};
@@ -246,19 +245,21 @@ fn render_pixel<A: Accel, I: Integrator>(
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
     for first in (0..s.spp).step_by(8) {
         let n = (s.spp - first).min(8) as usize;
-        let mut samples: [Option<(Sampler, Vec2, Ray)>; 8] =
-            std::array::from_fn(|k| (k < n).then(|| camera_sample(world, s, x, y, pixel, key, first + k as u32)));
-        // Lanes past the pixel's last sample are not traced.
-        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
-        for (r, sample) in rays.iter_mut().zip(&samples) {
-            if let Some((_, _, ray)) = sample {
-                *r = *ray;
+        let mut samples: [Option<(Sampler, Vec2, Vec2)>; 8] =
+            std::array::from_fn(|k| (k < n).then(|| camera_film(world, s, x, y, pixel, key, first + k as u32)));
+        // The eight rays at once (`Camera::rays8`, the same rays as one at a time); lanes past
+        // the pixel's last sample repeat its first and are not traced.
+        let (mut film, mut lens) = ([Vec2::ZERO; 8], [Vec2::ZERO; 8]);
+        for k in 0..8 {
+            if let Some((_, f, l)) = &samples[if k < n { k } else { 0 }] {
+                (film[k], lens[k]) = (*f, *l);
             }
         }
+        let rays = world.scene.camera.rays8(&film, s.width, s.height, &lens);
         let hits = world.intersect_packet8(&rays, (0xffu32 >> (8 - n)) as u8);
-        for (slot, hit) in samples.iter_mut().zip(hits) {
-            let Some((sampler, film, ray)) = slot else { break };
-            let (film, ray) = (*film, *ray);
+        for (k, (slot, hit)) in samples.iter_mut().zip(hits).enumerate() {
+            let Some((sampler, _, _)) = slot else { break };
+            let (film, ray) = (film[k], rays[k]);
             stats.camera += 1;
             let mut sample = Accum::default();
             if s.aovs {
@@ -280,6 +281,7 @@ fn render_pixel<A: Accel, I: Integrator>(
 
 /// Camera sample `i` of a pixel: its sampler (past the camera's dimensions), film position and
 /// ray.
+#[cfg(test)]
 fn camera_sample<A: Accel>(
     world: &World<A>,
     s: &RenderSettings,
@@ -288,7 +290,22 @@ fn camera_sample<A: Accel>(
     pixel: u64,
     key: u32,
     i: u32,
-) -> (Sampler, Vec2, Ray) {
+) -> (Sampler, Vec2, crate::geometry::Ray) {
+    let (sampler, film, lens) = camera_film(world, s, x, y, pixel, key, i);
+    (sampler, film, world.scene.camera.ray(film, s.width, s.height, lens))
+}
+
+/// Camera sample `i` of a pixel without its ray: its sampler (past the camera's dimensions),
+/// film position and lens sample.
+fn camera_film<A: Accel>(
+    world: &World<A>,
+    s: &RenderSettings,
+    x: u32,
+    y: u32,
+    pixel: u64,
+    key: u32,
+    i: u32,
+) -> (Sampler, Vec2, Vec2) {
     let mut sampler = Sampler::new(s.sampler, s.seed, pixel, i, s.spp);
     let (film_u, lens_u) = match s.sampler {
         SamplerKind::Independent => {
@@ -311,8 +328,7 @@ fn camera_sample<A: Accel>(
         Reconstruction::Splat => film_u - Vec2::splat(0.5),
     };
     let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
-    let ray = world.scene.camera.ray(film, s.width, s.height, lens_u);
-    (sampler, film, ray)
+    (sampler, film, lens_u)
 }
 
 #[cfg(test)]
