@@ -279,22 +279,6 @@ fn render_pixel<A: Accel, I: Integrator>(
     }
 }
 
-/// Camera sample `i` of a pixel: its sampler (past the camera's dimensions), film position and
-/// ray.
-#[cfg(test)]
-fn camera_sample<A: Accel>(
-    world: &World<A>,
-    s: &RenderSettings,
-    x: u32,
-    y: u32,
-    pixel: u64,
-    key: u32,
-    i: u32,
-) -> (Sampler, Vec2, crate::geometry::Ray) {
-    let (sampler, film, lens) = camera_film(world, s, x, y, pixel, key, i);
-    (sampler, film, world.scene.camera.ray(film, s.width, s.height, lens))
-}
-
 /// Camera sample `i` of a pixel without its ray: its sampler (past the camera's dimensions),
 /// film position and lens sample.
 fn camera_film<A: Accel>(
@@ -385,7 +369,8 @@ mod tests {
                     let key = (crate::sampling::mix64(settings.seed ^ pixel) >> 32) as u32;
                     let (mut sum, mut n) = (Rgb::ZERO, 0.0f32);
                     for i in 0..settings.spp {
-                        let (mut sampler, _, ray) = camera_sample(w, &settings, x, y, pixel, key, i);
+                        let (mut sampler, film, lens) = camera_film(w, &settings, x, y, pixel, key, i);
+                        let ray = w.scene.camera.ray(film, settings.width, settings.height, lens);
                         let hit = w.intersect(&ray, f32::INFINITY);
                         lit += usize::from(hit.is_some());
                         let mut stats = RayStats::default();
