@@ -293,7 +293,7 @@ fn node_index(r: u32) -> usize {
     r as usize / NODE_UNITS
 }
 
-/// A BVH over primitive boxes (built binary, traversed 4-wide).
+/// A BVH over primitive boxes (built binary, traversed 8-wide).
 pub struct Bvh {
     nodes: Vec<Wide>,
     /// `(first, count)` ranges of `prims`.
@@ -906,8 +906,7 @@ impl RayPre {
 }
 
 /// The float `x` as an integer key. Keys of non-negative floats order as the floats do, and
-/// the keys of negative floats (`-0.0` and the NaN that `0 · inf` gives on x86 included) are
-/// below all of those.
+/// the keys of negative floats (`-0.0` included) are below all of those.
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 fn key(x: f32) -> i32 {
