@@ -245,20 +245,21 @@ fn render_pixel<A: Accel, I: Integrator>(
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
     for first in (0..s.spp).step_by(8) {
         let n = (s.spp - first).min(8) as usize;
-        let mut samples: [Option<(Sampler, Vec2, Vec2)>; 8] =
-            std::array::from_fn(|k| (k < n).then(|| camera_film(world, s, x, y, pixel, key, first + k as u32)));
+        let mut samplers: [Option<Sampler>; 8] = std::array::from_fn(|_| None);
+        let (mut film, mut lens) = ([Vec2::ZERO; 8], [Vec2::ZERO; 8]);
+        for k in 0..n {
+            let (sampler, f, l) = camera_film(world, s, x, y, pixel, key, first + k as u32);
+            (samplers[k], film[k], lens[k]) = (Some(sampler), f, l);
+        }
         // The eight rays at once (`Camera::rays8`, the same rays as one at a time); lanes past
         // the pixel's last sample repeat its first and are not traced.
-        let (mut film, mut lens) = ([Vec2::ZERO; 8], [Vec2::ZERO; 8]);
-        for k in 0..8 {
-            if let Some((_, f, l)) = &samples[if k < n { k } else { 0 }] {
-                (film[k], lens[k]) = (*f, *l);
-            }
+        for k in n..8 {
+            (film[k], lens[k]) = (film[0], lens[0]);
         }
         let rays = world.scene.camera.rays8(&film, s.width, s.height, &lens);
         let hits = world.intersect_packet8(&rays, (0xffu32 >> (8 - n)) as u8);
-        for (k, (slot, hit)) in samples.iter_mut().zip(hits).enumerate() {
-            let Some((sampler, _, _)) = slot else { break };
+        for (k, (slot, hit)) in samplers.iter_mut().zip(hits).enumerate() {
+            let Some(sampler) = slot else { break };
             let (film, ray) = (film[k], rays[k]);
             stats.camera += 1;
             let mut sample = Accum::default();

@@ -14,7 +14,7 @@
 //! visits the children nearest first and skips stacked nodes that lie beyond the closest hit.
 
 use super::{Accel, AccelParams, AccelStats, BvhParams, Counter};
-use crate::geometry::{Aabb, Ray};
+use crate::geometry::{Aabb, Ray, EXIT_ROUNDING};
 use glam::Vec3A;
 
 /// How a node's primitives are divided between its two children.
@@ -869,10 +869,6 @@ fn collapse(bin: &[Node]) -> (Vec<Wide>, Vec<(u32, u32)>, usize) {
     (nodes, leaves, max_depth)
 }
 
-/// Rounds the exit distance of a slab test up, so that the test stays conservative: the
-/// distances carry up to about 2 ulp of error each.
-const EXIT_ROUNDING: f32 = 1.0 + 4.0 * f32::EPSILON;
-
 /// Per-ray data for the wide slab test: origin, inverse direction, the inverse direction
 /// rounded up for exit distances, and for each axis which of the `bounds` rows holds the near
 /// plane (min for a positive direction, max otherwise).
@@ -1006,39 +1002,30 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
 #[target_feature(enable = "avx2")]
 #[inline]
 fn slab_avx(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
-    use std::arch::x86_64::*;
-    const { assert!(WIDTH == 8, "one AVX register holds eight children") };
-    if !r.finite {
-        return slab_avx_float(n, r, t_max);
+    if r.finite {
+        slab_avx_with::<true>(n, r, t_max)
+    } else {
+        slab_avx_float(n, r, t_max)
     }
-    let b = &n.bounds;
-    let (i, f) = (_mm256_castps_si256, _mm256_castsi256_ps);
-    let mut tn = _mm256_setzero_si256();
-    let mut tf = i(_mm256_set1_ps(t_max * EXIT_ROUNDING));
-    for a in 0..3 {
-        let o = _mm256_set1_ps(r.o[a]);
-        // SAFETY: unaligned loads of 8-float rows of `n`.
-        let (lo, hi) = unsafe { (_mm256_loadu_ps(b[r.near[a]].as_ptr()), _mm256_loadu_ps(b[r.far[a]].as_ptr())) };
-        let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, o), _mm256_set1_ps(r.inv[a]));
-        let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, o), _mm256_set1_ps(r.inv_exit[a]));
-        tn = _mm256_max_epi32(i(t0), tn);
-        tf = _mm256_min_epi32(i(t1), tf);
-    }
-    let mask = _mm256_movemask_ps(f(_mm256_cmpgt_epi32(tn, tf))) as u32 ^ 0xff;
-    let mut out = [0.0f32; WIDTH];
-    // SAFETY: an unaligned store into a local array of eight floats.
-    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), f(tn)) };
-    (out, mask)
 }
 
-/// [`slab_avx`] for rays with a zero direction component: float maxima and minima, which
-/// ignore NaN distances (kept out of the hot path).
+/// [`slab_avx`] for rays with a zero direction component (kept out of the hot path).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[cold]
 #[inline(never)]
 fn slab_avx_float(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
+    slab_avx_with::<false>(n, r, t_max)
+}
+
+/// [`slab_avx`]'s arithmetic: maxima and minima on the floats' bits where `INT`, float ones
+/// otherwise (the running value second, so that NaN distances are ignored, as in `slab`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn slab_avx_with<const INT: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
     use std::arch::x86_64::*;
+    const { assert!(WIDTH == 8, "one AVX register holds eight children") };
     let b = &n.bounds;
     let mut tn = _mm256_setzero_ps();
     let mut tf = _mm256_set1_ps(t_max * EXIT_ROUNDING);
@@ -1048,15 +1035,37 @@ fn slab_avx_float(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
         let (lo, hi) = unsafe { (_mm256_loadu_ps(b[r.near[a]].as_ptr()), _mm256_loadu_ps(b[r.far[a]].as_ptr())) };
         let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, o), _mm256_set1_ps(r.inv[a]));
         let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, o), _mm256_set1_ps(r.inv_exit[a]));
-        // As in `slab`: the running value second, so that NaN distances are ignored.
-        tn = _mm256_max_ps(t0, tn);
-        tf = _mm256_min_ps(t1, tf);
+        (tn, tf) = if INT { (imax8(t0, tn), imin8(t1, tf)) } else { (_mm256_max_ps(t0, tn), _mm256_min_ps(t1, tf)) };
     }
-    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
+    let mask = if INT {
+        _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(tn), _mm256_castps_si256(tf))))
+            as u32
+            ^ 0xff
+    } else {
+        _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
+    };
     let mut out = [0.0f32; WIDTH];
     // SAFETY: an unaligned store into a local array of eight floats.
     unsafe { _mm256_storeu_ps(out.as_mut_ptr(), tn) };
     (out, mask)
+}
+
+/// The lane-wise maximum of the floats' bits as integers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn imax8(a: std::arch::x86_64::__m256, b: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    _mm256_castsi256_ps(_mm256_max_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
+}
+
+/// The lane-wise minimum of the floats' bits as integers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn imin8(a: std::arch::x86_64::__m256, b: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
 }
 
 /// Visits interior node `n`: pushes the children hit within `t_max` onto the stack, farthest
@@ -1298,7 +1307,7 @@ impl Bvh {
 /// fetched once for all of them.
 #[cfg(target_arch = "x86_64")]
 mod packet {
-    use super::{Bvh, EMPTY, LEAF, MAX_STACK, WIDTH};
+    use super::{imax8, imin8, Bvh, EMPTY, EXIT_ROUNDING, LEAF, MAX_STACK, WIDTH};
     use crate::geometry::Ray;
     use std::arch::x86_64::*;
 
@@ -1347,7 +1356,7 @@ mod packet {
             tn = _mm256_max_ps(near, tn);
             tf = _mm256_min_ps(far, tf);
         }
-        let tf = _mm256_mul_ps(tf, _mm256_set1_ps(1.0 + 4.0 * f32::EPSILON));
+        let tf = _mm256_mul_ps(tf, _mm256_set1_ps(EXIT_ROUNDING));
         (tn, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32)
     }
 
@@ -1471,27 +1480,15 @@ mod packet {
                 // and maxima and minima are taken on the floats' bits as in the single-ray
                 // `slab_avx`: the entry's includes 0, and an extreme below zero stays below
                 // zero and rejects the box.
-                let near = imin(_mm256_mul_ps(near, self.inv_lo[a]), _mm256_mul_ps(near, self.inv_hi[a]));
-                let far = imax(_mm256_mul_ps(far, self.inv_lo[a]), _mm256_mul_ps(far, self.inv_hi[a]));
-                tn = imax(tn, near);
-                tf = imin(tf, far);
+                let near = imin8(_mm256_mul_ps(near, self.inv_lo[a]), _mm256_mul_ps(near, self.inv_hi[a]));
+                let far = imax8(_mm256_mul_ps(far, self.inv_lo[a]), _mm256_mul_ps(far, self.inv_hi[a]));
+                tn = imax8(tn, near);
+                tf = imin8(tf, far);
             }
-            let tf = _mm256_mul_ps(tf, _mm256_set1_ps(super::EXIT_ROUNDING));
+            let tf = _mm256_mul_ps(tf, _mm256_set1_ps(EXIT_ROUNDING));
             let outside = _mm256_cmpgt_epi32(_mm256_castps_si256(tn), _mm256_castps_si256(tf));
             (tn, _mm256_movemask_ps(_mm256_castsi256_ps(outside)) as u32 ^ 0xff)
         }
-    }
-
-    /// The lane-wise maximum of the floats' bits as integers.
-    #[target_feature(enable = "avx2")]
-    fn imax(a: __m256, b: __m256) -> __m256 {
-        _mm256_castsi256_ps(_mm256_max_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
-    }
-
-    /// The lane-wise minimum of the floats' bits as integers.
-    #[target_feature(enable = "avx2")]
-    fn imin(a: __m256, b: __m256) -> __m256 {
-        _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
     }
 
     /// The smallest of the eight lanes.

@@ -218,7 +218,7 @@ fn exit_distance(b: &Aabb, ray: &Ray, inv: glam::Vec3, t_max: f32) -> f32 {
             t = tf;
         }
     }
-    t * (1.0 + 4.0 * f32::EPSILON)
+    t * crate::geometry::EXIT_ROUNDING
 }
 
 impl Accel for KdTree {

@@ -1,5 +1,10 @@
 use glam::Vec3;
 
+/// Slab tests round their exit distance up by this factor, so that they stay conservative:
+/// the distances carry up to about 2 ulp of error each, which could reject a ray that grazes a
+/// box holding a primitive it really hits.
+pub const EXIT_ROUNDING: f32 = 1.0 + 4.0 * f32::EPSILON;
+
 /// An axis-aligned bounding box. The empty box has `min = +inf`, `max = -inf`, so that
 /// [`Aabb::union`] with it is the identity and every slab test against it fails.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,9 +129,7 @@ impl Aabb {
         let tf = (far - o) * inv_d;
         let t_enter = t_min.max(tn.x).max(tn.y).max(tn.z);
         let t_exit = t_max.min(tf.x).min(tf.y).min(tf.z);
-        // Conservative rounding: the distances above carry up to ~2 ulp of error each, which
-        // could reject a ray that grazes a box holding a primitive it really hits.
-        if t_enter <= t_exit * (1.0 + 4.0 * f32::EPSILON) {
+        if t_enter <= t_exit * EXIT_ROUNDING {
             Some(t_enter)
         } else {
             None

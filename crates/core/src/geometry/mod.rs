@@ -5,7 +5,7 @@ mod offset;
 mod ray;
 mod transform;
 
-pub use aabb::Aabb;
+pub use aabb::{Aabb, EXIT_ROUNDING};
 pub use offset::{offset_ray_origin, spawn_ray, spawn_ray_to};
 pub use ray::Ray;
 pub use transform::Transform;
