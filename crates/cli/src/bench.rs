@@ -92,28 +92,29 @@ fn count_closest<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
     rays.par_chunks(1024).map(|c| c.iter().filter(|r| w.hit(r, f32::INFINITY).is_some()).count()).sum()
 }
 
-/// [`count_closest`] with the rays traced in packets of eight consecutive ones (the rest one
-/// by one); primary rays come in 4×2 tiles ([`tiles_of_eight`]).
+/// [`count_closest`] with the rays traced in packets of sixteen consecutive ones (the rest one
+/// by one); primary rays come in 4×4 tiles ([`tiles_of_sixteen`]).
 fn count_closest_packets<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
     rays.par_chunks(1024)
         .map(|c| {
-            let mut packets = c.chunks_exact(8);
+            let mut packets = c.chunks_exact(16);
             let mut n = 0;
             for p in packets.by_ref() {
-                let p: &[Ray; 8] = p.try_into().expect("chunks of eight");
-                n += w.hit_packet8(p, 0xff).iter().filter(|h| h.is_some()).count();
+                let groups: [[Ray; 8]; 2] = std::array::from_fn(|g| std::array::from_fn(|i| p[8 * g + i]));
+                n += w.hit_packet16(&groups, [0xff; 2]).iter().flatten().filter(|h| h.is_some()).count();
             }
             n + packets.remainder().iter().filter(|r| w.hit(r, f32::INFINITY).is_some()).count()
         })
         .sum()
 }
 
-/// Primary rays (one per pixel, row by row) reordered so that each eight consecutive rays
-/// are a 4×2 pixel tile, the packets Embree's benchmark traces with `rtcIntersect8`. Rays that
-/// are not a `width × height` image, or tiles cut by the image's edge, keep their order.
-fn tiles_of_eight(rays: &[Ray], width: usize, height: usize) -> Vec<Ray> {
+/// Primary rays (one per pixel, row by row) reordered so that each sixteen consecutive rays
+/// are a 4×4 pixel tile, row by row, the packets Embree's benchmark traces with
+/// `rtcIntersect16`. Rays that are not a `width × height` image, or tiles cut by the image's
+/// edge, keep their order.
+fn tiles_of_sixteen(rays: &[Ray], width: usize, height: usize) -> Vec<Ray> {
     const TW: usize = 4;
-    const TH: usize = 2;
+    const TH: usize = 4;
     if rays.len() != width * height || !width.is_multiple_of(TW) || !height.is_multiple_of(TH) {
         return rays.to_vec();
     }
@@ -223,7 +224,7 @@ fn workload(mesh: &Mesh, scene: &Scene, args: &BenchArgs) -> Result<Vec<(&'stati
             (primary, bounce)
         }
     };
-    let tiled = tiles_of_eight(&primary, args.width as usize, args.height as usize);
+    let tiled = tiles_of_sixteen(&primary, args.width as usize, args.height as usize);
     Ok(vec![("primary", primary), ("primary-packets", tiled), ("bounce", bounce.clone()), ("bounce-occluded", bounce)])
 }
 

@@ -903,6 +903,29 @@ impl<'s, A: Accel> World<'s, A> {
         std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: objs[i], prim, b1: h.b1, b2: h.b2 }))
     }
 
+    /// [`World::hit_packet8`] for sixteen rays in two groups of eight (a 4×4 pixel tile: group
+    /// 0 its top two rows), with `active` lanes per group. A single mesh's tree is traversed
+    /// by all sixteen together ([`Accel::closest_leaf_packet16`]), each interior node tested
+    /// once for all of them; other scenes trace the groups as [`World::hit_packet8`] does.
+    pub fn hit_packet16(&self, rays: &[[Ray; 8]; 2], active: [u8; 2]) -> [[Option<RawHit>; 8]; 2] {
+        let Some((accel, blocks, ranges, labelled)) = self.packet_tree().filter(|_| self.packets) else {
+            return [self.hit_packet8(&rays[0], active[0]), self.hit_packet8(&rays[1], active[1])];
+        };
+        let mut packet = [PacketRays::default(), PacketRays::default()];
+        let mut t = [[f32::INFINITY; 8]; 2];
+        let mut rec: [[Option<(u32, TriHit)>; 8]; 2] = [[None; 8]; 2];
+        accel.closest_leaf_packet16(rays, active, &mut t, |g, leaf, lanes, tm| {
+            let blocks = TriData::leaf_blocks(blocks, ranges, labelled, leaf);
+            packet[g].closest_in_blocks(&rays[g], active[g], self.avx2, blocks, lanes, tm, &mut rec[g])
+        });
+        // The packet tree is the one object's.
+        std::array::from_fn(|g| {
+            std::array::from_fn(|i| {
+                rec[g][i].map(|(prim, h)| RawHit { t: t[g][i], object: 0, prim, b1: h.b1, b2: h.b2 })
+            })
+        })
+    }
+
     /// [`World::intersect`] for the `active` ones of eight rays, traced as a packet
     /// ([`World::hit_packet8`]).
     pub fn intersect_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<Intersection>; 8] {

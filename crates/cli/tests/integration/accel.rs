@@ -371,8 +371,8 @@ fn traversal_counts_and_structure_boxes() {
     }
 }
 
-/// Packets of eight rays (coherent camera rays, perspective and orthographic, and incoherent
-/// random ones) get exactly the hits that each ray gets alone, for every accelerator (the BVHs' AVX2 packet traversal where the
+/// Packets of eight and of sixteen rays (coherent camera rays, perspective and orthographic,
+/// and incoherent random ones) get exactly the hits that each ray gets alone, for every accelerator (the BVHs' AVX2 packet traversal where the
 /// CPU has it, one by one elsewhere), on a single mesh (where packets are used) and on the
 /// two-level adversarial scene and a small mesh (where they fall back to single rays).
 #[test]
@@ -428,6 +428,30 @@ fn ray_packets_hit_what_single_rays_hit() {
                         );
                         hits += usize::from(want.is_some());
                         checked += 1;
+                    }
+                }
+                // Sixteen at once, as two groups of eight: every fourth packet with some lanes
+                // only, every seventh with its second group idle.
+                for (k, p) in all.chunks_exact(16).enumerate() {
+                    let groups: [[Ray; 8]; 2] = std::array::from_fn(|g| std::array::from_fn(|i| p[8 * g + i]));
+                    let mut active = if k % 4 == 3 { [(k * 37 % 255 + 1) as u8, (k * 91 % 255 + 1) as u8] } else { [0xff; 2] };
+                    if k % 7 == 6 {
+                        active[1] = 0;
+                    }
+                    let got = w.hit_packet16(&groups, active);
+                    for (g, (rays, got)) in groups.iter().zip(got).enumerate() {
+                        for (lane, (r, h)) in rays.iter().zip(got).enumerate() {
+                            if active[g] & (1 << lane) == 0 {
+                                assert!(h.is_none(), "{name} {kind:?}: lane {g}.{lane} is not active");
+                                continue;
+                            }
+                            let want = w.hit(r, f32::INFINITY);
+                            assert_eq!(
+                                want.map(|h| (h.t.to_bits(), h.object, h.prim, h.b1.to_bits(), h.b2.to_bits())),
+                                h.map(|h| (h.t.to_bits(), h.object, h.prim, h.b1.to_bits(), h.b2.to_bits())),
+                                "{name} {kind:?}: sixteen-ray packet {k}, lane {g}.{lane}"
+                            );
+                        }
                     }
                 }
                 (hits, checked)

@@ -1404,12 +1404,22 @@ mod packet {
         inv_hi: [__m256; 3],
     }
 
-    impl Frustum {
-        /// The frustum of the `active` rays, or None where a direction component changes sign
-        /// across them or is zero in one (its inverse is infinite), or where the rays share
-        /// neither their origin nor their direction.
+    /// Per axis, the range of a group of rays' origins and inverse directions, and the sign
+    /// all their directions share.
+    #[derive(Clone, Copy)]
+    struct Ranges {
+        neg: [bool; 3],
+        o_lo: [f32; 3],
+        o_hi: [f32; 3],
+        inv_lo: [f32; 3],
+        inv_hi: [f32; 3],
+    }
+
+    impl Ranges {
+        /// The ranges of the `active` rays, or None where there are none or a direction
+        /// component changes sign across them or is zero in one (its inverse is infinite).
         #[target_feature(enable = "avx2")]
-        fn new(r: &Rays8, active: u8) -> Option<Frustum> {
+        fn new(r: &Rays8, active: u8) -> Option<Ranges> {
             let active = active as i32;
             if active == 0 {
                 return None;
@@ -1436,8 +1446,36 @@ mod packet {
                 }
                 *neg = m != 0;
             }
-            let (o_lo, o_hi) = (r.o.map(lo), r.o.map(hi));
-            let (inv_lo, inv_hi) = (r.inv.map(lo), r.inv.map(hi));
+            Some(Ranges { neg, o_lo: r.o.map(lo), o_hi: r.o.map(hi), inv_lo: r.inv.map(lo), inv_hi: r.inv.map(hi) })
+        }
+
+        /// The ranges of both groups, or None where their directions' signs differ.
+        fn union(self, o: Ranges) -> Option<Ranges> {
+            let lo = |a: [f32; 3], b: [f32; 3]| std::array::from_fn(|i| a[i].min(b[i]));
+            let hi = |a: [f32; 3], b: [f32; 3]| std::array::from_fn(|i| a[i].max(b[i]));
+            (self.neg == o.neg).then(|| Ranges {
+                neg: self.neg,
+                o_lo: lo(self.o_lo, o.o_lo),
+                o_hi: hi(self.o_hi, o.o_hi),
+                inv_lo: lo(self.inv_lo, o.inv_lo),
+                inv_hi: hi(self.inv_hi, o.inv_hi),
+            })
+        }
+    }
+
+    impl Frustum {
+        /// The frustum of the `active` rays, or None where [`Ranges::new`] finds none or the
+        /// rays share neither their origin nor their direction.
+        #[target_feature(enable = "avx2")]
+        fn new(r: &Rays8, active: u8) -> Option<Frustum> {
+            Frustum::of(Ranges::new(r, active)?)
+        }
+
+        /// The frustum of rays with ranges `g`, or None where the rays share neither their
+        /// origin nor their direction.
+        #[target_feature(enable = "avx2")]
+        fn of(g: Ranges) -> Option<Frustum> {
+            let Ranges { neg, o_lo, o_hi, inv_lo, inv_hi } = g;
             // Intervals of origins times intervals of directions make a tight frustum where one
             // of them is a point: one origin (a pinhole camera) or one direction (an
             // orthographic one). Rays from across a lens aimed at one focus point would make a
@@ -1514,24 +1552,28 @@ mod packet {
 
     /// Packet traversal with the frustum: interior nodes are entered by the frustum test, and
     /// only a leaf's own box is tested ray by ray (with the single-ray arithmetic), so every
-    /// ray tests the leaves its own traversal would, and perhaps a few more.
+    /// ray tests the leaves its own traversal would, and perhaps a few more. The packet is `P`
+    /// groups of eight rays under one frustum; lane masks hold eight bits per group, group
+    /// `g`'s at bit `8g`.
     ///
     /// # Safety
     /// The CPU must support AVX2.
     #[target_feature(enable = "avx2")]
-    unsafe fn frustum_walk(
+    unsafe fn frustum_walk<const P: usize>(
         bvh: &Bvh,
-        r: &Rays8,
+        r: &[Rays8; P],
         f: &Frustum,
-        active: u8,
-        t_max: &mut [f32; 8],
-        leaf: &mut impl FnMut(u32, u32, &mut [f32; 8], &mut u8),
-        hits: &mut u8,
+        active: [u8; P],
+        t_max: &mut [[f32; 8]; P],
+        leaf: &mut impl FnMut(u32, u32, &mut [[f32; 8]; P]),
     ) {
-        let mut far = farthest(t_max, active);
+        let farthest_all =
+            |t_max: &[[f32; 8]; P]| (0..P).map(|g| farthest(&t_max[g], active[g])).fold(f32::NEG_INFINITY, f32::max);
+        let all = (0..P).fold(0u32, |m, g| m | (active[g] as u32) << (8 * g));
+        let mut far = farthest_all(t_max);
         // (reference, lanes, entry distance); only entries below `sp` are read.
         let mut stack = [std::mem::MaybeUninit::<(u32, u32, f32)>::uninit(); (WIDTH - 1) * MAX_STACK];
-        stack[0].write((0, active as u32, 0.0));
+        stack[0].write((0, all, 0.0));
         let mut sp = 1usize;
         while sp > 0 {
             sp -= 1;
@@ -1541,8 +1583,8 @@ mod packet {
                 continue;
             }
             if cur & LEAF != 0 {
-                leaf(cur & !LEAF, mask, t_max, hits);
-                far = farthest(t_max, active);
+                leaf(cur & !LEAF, mask, t_max);
+                far = farthest_all(t_max);
                 continue;
             }
             let n = bvh.node(cur);
@@ -1553,8 +1595,8 @@ mod packet {
             let mut t = [0.0f32; 8];
             // SAFETY: an unaligned store into a local array of eight floats.
             unsafe { _mm256_storeu_ps(t.as_mut_ptr(), tn) };
-            // SAFETY: an unaligned load of the eight lanes' t_max.
-            let tm = unsafe { _mm256_loadu_ps(t_max.as_ptr()) };
+            // SAFETY: unaligned loads of each group's eight t_max.
+            let tm: [__m256; P] = std::array::from_fn(|g| unsafe { _mm256_loadu_ps(t_max[g].as_ptr()) });
             // Children ordered far to near, so that the nearest is popped first.
             let mut kids = Kids::default();
             for j in crate::accel::lanes(hit) {
@@ -1562,7 +1604,11 @@ mod packet {
                 if c == EMPTY {
                     continue;
                 }
-                let lanes = if c & LEAF != 0 { slab8(&n.bounds, j, r, tm).1 & active as u32 } else { active as u32 };
+                let lanes = if c & LEAF != 0 {
+                    (0..P).fold(0u32, |m, g| m | (slab8(&n.bounds, j, &r[g], tm[g]).1 & active[g] as u32) << (8 * g))
+                } else {
+                    all
+                };
                 if lanes != 0 {
                     kids.insert((c, lanes, t[j]));
                 }
@@ -1572,6 +1618,49 @@ mod packet {
                 sp += 1;
             }
         }
+    }
+
+    /// [`closest8`] for sixteen rays, two groups of eight under one frustum (each interior
+    /// node is tested once for all sixteen); `test(group, leaf, lanes, t_max)` tests a group's
+    /// rays. Where the sixteen make no frustum, each group is traced as [`closest8`] traces it.
+    /// Returns each group's mask of lanes that hit.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest16(
+        bvh: &Bvh,
+        rays: &[[Ray; 8]; 2],
+        active: [u8; 2],
+        t_max: &mut [[f32; 8]; 2],
+        test: &mut impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
+    ) -> [u8; 2] {
+        let mut hits = [0u8; 2];
+        if !bvh.root_leaf && !bvh.nodes.is_empty() {
+            let r = [load(&rays[0]), load(&rays[1])];
+            let frustum = match (Ranges::new(&r[0], active[0]), Ranges::new(&r[1], active[1])) {
+                (Some(a), Some(b)) => a.union(b).and_then(|g| Frustum::of(g)),
+                _ => None,
+            };
+            if let Some(f) = frustum {
+                let mut leaf = |leaf: u32, mask: u32, t_max: &mut [[f32; 8]; 2]| {
+                    for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
+                        let lanes = (mask >> (8 * g)) as u8;
+                        if lanes != 0 {
+                            *h |= test(g, leaf, lanes, t);
+                        }
+                    }
+                };
+                // SAFETY: the caller guarantees AVX2.
+                unsafe { frustum_walk(bvh, &r, &f, active, t_max, &mut leaf) };
+                return hits;
+            }
+        }
+        for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
+            // SAFETY: the caller guarantees AVX2.
+            *h = unsafe { closest8(bvh, &rays[g], active[g], t, &mut |leaf, lanes, t| test(g, leaf, lanes, t)) };
+        }
+        hits
     }
 
     /// # Safety
@@ -1585,19 +1674,20 @@ mod packet {
         test: &mut impl FnMut(u32, u8, &mut [f32; 8]) -> u8,
     ) -> u8 {
         let mut hits = 0u8;
-        let mut leaf =
-            |leaf: u32, mask: u32, t_max: &mut [f32; 8], hits: &mut u8| *hits |= test(leaf, mask as u8, t_max);
         if bvh.root_leaf {
-            leaf(bvh.root_ref & !LEAF, active as u32, t_max, &mut hits);
-            return hits;
+            return test(bvh.root_ref & !LEAF, active, t_max);
         }
         if bvh.nodes.is_empty() {
             return 0;
         }
         let r = load(rays);
         if let Some(f) = Frustum::new(&r, active) {
+            let mut leaf =
+                |leaf: u32, mask: u32, t_max: &mut [[f32; 8]; 1]| hits |= test(leaf, mask as u8, &mut t_max[0]);
             // SAFETY: the caller guarantees AVX2.
-            unsafe { frustum_walk(bvh, &r, &f, active, t_max, &mut leaf, &mut hits) };
+            unsafe {
+                frustum_walk(bvh, std::array::from_ref(&r), &f, [active], std::array::from_mut(t_max), &mut leaf)
+            };
             return hits;
         }
         // Uninitialised, as in the single-ray traversal: only entries below `sp` are read.
@@ -1609,7 +1699,7 @@ mod packet {
             // SAFETY: stack[sp] was written before sp was raised past it.
             let (cur, mask) = unsafe { stack[sp].assume_init() };
             if cur & LEAF != 0 {
-                leaf(cur & !LEAF, mask, t_max, &mut hits);
+                hits |= test(cur & !LEAF, mask as u8, t_max);
                 continue;
             }
             let n = bvh.node(cur);
@@ -1736,6 +1826,24 @@ impl Accel for Bvh {
             return unsafe { packet::closest8(self, rays, active, t_max, &mut test) };
         }
         super::lane_by_lane(self, rays, active, t_max, test)
+    }
+
+    fn closest_leaf_packet16(
+        &self,
+        rays: &[[Ray; 8]; 2],
+        active: [u8; 2],
+        t_max: &mut [[f32; 8]; 2],
+        mut test: impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
+    ) -> [u8; 2] {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx {
+            // SAFETY: `avx` is set only where AVX2 was detected.
+            return unsafe { packet::closest16(self, rays, active, t_max, &mut test) };
+        }
+        let [t0, t1] = t_max;
+        let h0 = super::lane_by_lane(self, &rays[0], active[0], t0, |leaf, lanes, t| test(0, leaf, lanes, t));
+        let h1 = super::lane_by_lane(self, &rays[1], active[1], t1, |leaf, lanes, t| test(1, leaf, lanes, t));
+        [h0, h1]
     }
 
     fn build(boxes: &[Aabb], params: &BvhParams) -> Self {

@@ -129,6 +129,23 @@ pub trait Accel: Send + Sync + Sized {
         lane_by_lane(self, rays, active, t_max, test)
     }
 
+    /// [`Accel::closest_leaf_packet8`] for sixteen rays in two groups of eight (a 4×4 pixel
+    /// tile: group 0 its top two rows): `test(group, leaf, lanes, t_max)` tests the rays of a
+    /// group's `lanes` against a leaf. Returns each group's mask of lanes that hit. The
+    /// default traces the groups one after the other.
+    fn closest_leaf_packet16(
+        &self,
+        rays: &[[Ray; 8]; 2],
+        active: [u8; 2],
+        t_max: &mut [[f32; 8]; 2],
+        mut test: impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
+    ) -> [u8; 2] {
+        let [t0, t1] = t_max;
+        let h0 = self.closest_leaf_packet8(&rays[0], active[0], t0, |leaf, lanes, t| test(0, leaf, lanes, t));
+        let h1 = self.closest_leaf_packet8(&rays[1], active[1], t1, |leaf, lanes, t| test(1, leaf, lanes, t));
+        [h0, h1]
+    }
+
     /// Size and shape of the structure.
     fn stats(&self) -> AccelStats;
 
