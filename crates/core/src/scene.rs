@@ -908,8 +908,11 @@ impl<'s, A: Accel> World<'s, A> {
     /// by all sixteen together ([`Accel::closest_leaf_packet16`]), each interior node tested
     /// once for all of them; other scenes trace the groups as [`World::hit_packet8`] does.
     pub fn hit_packet16(&self, rays: &[[Ray; 8]; 2], active: [u8; 2]) -> [[Option<RawHit>; 8]; 2] {
-        let Some((accel, blocks, ranges, labelled)) = self.packet_tree().filter(|_| self.packets) else {
-            return [self.hit_packet8(&rays[0], active[0]), self.hit_packet8(&rays[1], active[1])];
+        let tree = self.packet_tree().filter(|_| self.packets && active[0] != 0 && active[1] != 0);
+        let Some((accel, blocks, ranges, labelled)) = tree else {
+            let idle = [None; 8];
+            let group = |g: usize| if active[g] != 0 { self.hit_packet8(&rays[g], active[g]) } else { idle };
+            return [group(0), group(1)];
         };
         let mut packet = [PacketRays::default(), PacketRays::default()];
         let mut t = [[f32::INFINITY; 8]; 2];
