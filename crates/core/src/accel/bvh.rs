@@ -869,6 +869,9 @@ fn collapse(bin: &[Node]) -> (Vec<Wide>, Vec<(u32, u32)>, usize) {
     (nodes, leaves, max_depth)
 }
 
+/// Bytes in one row of a node's bounds (eight floats).
+const ROW_BYTES: usize = std::mem::size_of::<[f32; WIDTH]>();
+
 /// Per-ray data for the wide slab test: origin, inverse direction, the inverse direction
 /// rounded up for exit distances, and for each axis which of the `bounds` rows holds the near
 /// plane (min for a positive direction, max otherwise).
@@ -883,6 +886,10 @@ struct RayPre {
     finite: bool,
     near: [usize; 3],
     far: [usize; 3],
+    /// `near` and `far` as byte offsets of the rows in a node's bounds (the AVX2 test loads
+    /// a row at base plus offset, without scaling an index per node).
+    near_bytes: [usize; 3],
+    far_bytes: [usize; 3],
 }
 
 impl RayPre {
@@ -897,6 +904,8 @@ impl RayPre {
             finite: inv_exit.is_finite(),
             near: [nx, 1 + ny, 2 + nz],
             far: [3 - nx, 4 - ny, 5 - nz],
+            near_bytes: [nx, 1 + ny, 2 + nz].map(|row| row * ROW_BYTES),
+            far_bytes: [3 - nx, 4 - ny, 5 - nz].map(|row| row * ROW_BYTES),
         }
     }
 }
@@ -1031,8 +1040,12 @@ fn slab_avx_with<const INT: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WI
     let mut tf = _mm256_set1_ps(t_max * EXIT_ROUNDING);
     for a in 0..3 {
         let o = _mm256_set1_ps(r.o[a]);
-        // SAFETY: unaligned loads of 8-float rows of `n`.
-        let (lo, hi) = unsafe { (_mm256_loadu_ps(b[r.near[a]].as_ptr()), _mm256_loadu_ps(b[r.far[a]].as_ptr())) };
+        // SAFETY: unaligned loads of 8-float rows of `n`: the offsets are row indices below 6
+        // times the row size (`RayPre::new`).
+        let base = b.as_ptr().cast::<u8>();
+        let (lo, hi) = unsafe {
+            (_mm256_loadu_ps(base.add(r.near_bytes[a]).cast()), _mm256_loadu_ps(base.add(r.far_bytes[a]).cast()))
+        };
         let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, o), _mm256_set1_ps(r.inv[a]));
         let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, o), _mm256_set1_ps(r.inv_exit[a]));
         (tn, tf) = if INT { (imax8(t0, tn), imin8(t1, tf)) } else { (_mm256_max_ps(t0, tn), _mm256_min_ps(t1, tf)) };
