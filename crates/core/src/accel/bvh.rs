@@ -1438,10 +1438,7 @@ mod packet {
                 return None;
             }
             // Lanes left out of the ranges are replaced by the identity of min or max.
-            let lanes = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
-                _mm256_and_si256(_mm256_set1_epi32(active), _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128)),
-                _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
-            ));
+            let lanes = lane_mask(active as u8);
             let (inf, ninf) = (_mm256_set1_ps(f32::INFINITY), _mm256_set1_ps(f32::NEG_INFINITY));
             let lo = |v: __m256| hmin(_mm256_blendv_ps(inf, v, lanes));
             let hi = |v: __m256| hmax(_mm256_blendv_ps(ninf, v, lanes));
@@ -1558,9 +1555,19 @@ mod packet {
         _mm_cvtss_f32(_mm_max_ss(m, _mm_shuffle_ps::<1>(m, m)))
     }
 
-    /// The largest `t_max` of the `active` lanes.
+    /// All bits set in the lanes of the `active` mask, none in the others.
+    #[target_feature(enable = "avx2")]
+    fn lane_mask(active: u8) -> __m256 {
+        let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(active as i32), bits), bits))
+    }
+
+    /// The largest `t_max` of the `active` lanes (−∞ for none; the bounds are never NaN).
+    #[target_feature(enable = "avx2")]
     fn farthest(t_max: &[f32; 8], active: u8) -> f32 {
-        (0..8).filter(|&i| active & (1 << i) != 0).map(|i| t_max[i]).fold(f32::NEG_INFINITY, f32::max)
+        // SAFETY: an unaligned load of eight floats.
+        let t = unsafe { _mm256_loadu_ps(t_max.as_ptr()) };
+        hmax(_mm256_blendv_ps(_mm256_set1_ps(f32::NEG_INFINITY), t, lane_mask(active)))
     }
 
     /// Packet traversal with the frustum: interior nodes are entered by the frustum test, and
