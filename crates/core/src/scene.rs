@@ -314,15 +314,8 @@ impl PacketRays {
         #[cfg(target_arch = "x86_64")]
         if avx2 && lanes.count_ones() >= 2 {
             let r4 = &mut self.r4;
-            let wide = self.wide.get_or_insert_with(|| {
-                for lane in crate::accel::lanes(active.into()) {
-                    shared_ray4(&mut r4[lane], &rays[lane]);
-                }
-                let first = r4.iter().flatten().next()?;
-                let refs: [&Ray4; 8] = std::array::from_fn(|i| r4[i].as_ref().unwrap_or(first));
-                // SAFETY: `avx2` says the CPU has AVX2.
-                unsafe { crate::shape::Rays8::new(refs, active) }
-            });
+            // SAFETY: `avx2` says the CPU has AVX2.
+            let wide = self.wide.get_or_insert_with(|| unsafe { crate::shape::Rays8::from_rays(rays, active) });
             if let Some(w) = wide {
                 for block in blocks {
                     // SAFETY: `avx2` says the CPU has AVX2.

@@ -216,27 +216,46 @@ pub struct Rays8 {
 
 #[cfg(target_arch = "x86_64")]
 impl Rays8 {
-    /// The rays of the `lanes` mask (other lanes copy the first), or None where two of them
-    /// permute the axes differently.
+    /// The rays of the `lanes` mask (other lanes copy the first) made straight from the rays,
+    /// eight at a time: the same axes and shear as [`WatertightRay::new`] gives each (the same
+    /// comparisons, and divisions in AVX lanes, which round as scalar ones do), or None where
+    /// two of them permute the axes differently.
     ///
     /// # Safety
     /// The CPU must support AVX2.
     #[target_feature(enable = "avx2")]
-    pub unsafe fn new(rays: [&Ray4; 8], lanes: u8) -> Option<Rays8> {
+    pub unsafe fn from_rays(rays: &[crate::geometry::Ray; 8], lanes: u8) -> Option<Rays8> {
         use std::arch::x86_64::*;
-        let first = rays[lanes.trailing_zeros() as usize & 7];
-        if crate::accel::lanes(lanes.into()).any(|i| rays[i].k != first.k) {
-            return None;
-        }
-        let lane = |f: &dyn Fn(&Ray4) -> f32| {
-            let v: [f32; 8] = std::array::from_fn(|i| f(if lanes & (1 << i) != 0 { rays[i] } else { first }));
+        let first = &rays[lanes.trailing_zeros() as usize & 7];
+        let row = |f: &dyn Fn(&crate::geometry::Ray) -> f32| {
+            let v: [f32; 8] = std::array::from_fn(|i| f(if lanes & (1 << i) != 0 { &rays[i] } else { first }));
             // SAFETY: an unaligned load of a local array of eight floats.
             unsafe { _mm256_loadu_ps(v.as_ptr()) }
         };
+        let d = [row(&|r| r.d.x), row(&|r| r.d.y), row(&|r| r.d.z)];
+        let sign = _mm256_set1_ps(-0.0);
+        let [ax, ay, az] = d.map(|v| _mm256_andnot_ps(sign, v));
+        // A mask's lanes all agree: every bit of the eight set, or none.
+        let uniform = |m: __m256| -> Option<bool> {
+            match _mm256_movemask_ps(m) as u8 {
+                0 => Some(false),
+                0xff => Some(true),
+                _ => None,
+            }
+        };
+        let x_max = uniform(_mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(ax, ay), _mm256_cmp_ps::<_CMP_GE_OQ>(ax, az)))?;
+        // As `WatertightRay::new` chooses them (y against z matters only where x is not the
+        // largest).
+        let kz = if x_max { 0 } else { 2 - uniform(_mm256_cmp_ps::<_CMP_GE_OQ>(ay, az))? as usize };
+        let (kx, ky) = ([1, 2, 0][kz], [2, 0, 1][kz]);
+        let negative = uniform(_mm256_cmp_ps::<_CMP_LT_OQ>(d[kz], _mm256_setzero_ps()))?;
+        let swap = (kx ^ ky) * negative as usize;
+        let (kx, ky) = (kx ^ swap, ky ^ swap);
+        let o = [row(&|r| r.o.x), row(&|r| r.o.y), row(&|r| r.o.z)];
         Some(Rays8 {
-            o: [lane(&|r| r.o[0]), lane(&|r| r.o[1]), lane(&|r| r.o[2])],
-            s: [lane(&|r| r.s[0]), lane(&|r| r.s[1]), lane(&|r| r.s[2])],
-            k: first.k.map(usize::from),
+            o: [o[kx], o[ky], o[kz]],
+            s: [_mm256_div_ps(d[kx], d[kz]), _mm256_div_ps(d[ky], d[kz]), _mm256_div_ps(_mm256_set1_ps(1.0), d[kz])],
+            k: [kx, ky, kz],
         })
     }
 }
@@ -410,10 +429,12 @@ mod tests {
         assert!(hits > 2_000, "too few hits to mean anything: {hits}");
     }
 
-    /// The eight-ray test gives each ray exactly what the block's own test gives it (the
-    /// undecided rays finished by that test, as the caller does): random blocks, packets of
-    /// rays from one point towards the block (some aimed exactly at a shared vertex, which
-    /// makes edge functions zero), random lanes and bounds.
+    /// The eight-ray test, its rays made by [`Rays8::from_rays`], gives each ray exactly what
+    /// the block's own test gives it with the ray's own set-up (the undecided rays finished by
+    /// that test, as the caller does): random blocks, packets of rays from one point towards
+    /// the block (some aimed exactly at a shared vertex, which makes edge functions zero),
+    /// random lanes and bounds, the scene turned so that every axis dominates with either
+    /// sign.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn eight_ray_test_matches_the_block_test_bit_for_bit() {
@@ -425,21 +446,43 @@ mod tests {
         let (mut hits, mut undecided, mut packets) = (0, 0, 0);
         for case in 0..5_000 {
             let n = 1 + case % 4;
-            let shared = random_point(&mut rng, 2.0);
+            // Axes rotated by case % 3, and mirrored every other case.
+            let turn = |p: Vec3| {
+                let p = match case % 3 {
+                    0 => p,
+                    1 => Vec3::new(p.z, p.x, p.y),
+                    _ => Vec3::new(p.y, p.z, p.x),
+                };
+                if case % 2 == 1 {
+                    -p
+                } else {
+                    p
+                }
+            };
+            let shared = turn(random_point(&mut rng, 2.0));
             let tris: Vec<(u32, [Vec3; 3])> = (0..n)
-                .map(|i| (i as u32 * 5 + 2, [shared, random_point(&mut rng, 2.0), random_point(&mut rng, 2.0)]))
+                .map(|i| {
+                    let (b, c) = (turn(random_point(&mut rng, 2.0)), turn(random_point(&mut rng, 2.0)));
+                    (i as u32 * 5 + 2, [shared, b, c])
+                })
                 .collect();
             let block = Tri4::pack(tris.iter().copied());
-            let o = random_point(&mut rng, 6.0) + Vec3::new(0.0, 0.0, 8.0);
-            let rays: [Ray4; 8] = std::array::from_fn(|i| {
-                let target = if (case + i) % 7 == 0 { shared } else { random_point(&mut rng, 1.5) };
-                Ray4::new(WatertightRay::new(o, (target - o).normalize()))
+            let o = turn(random_point(&mut rng, 6.0) + Vec3::new(0.0, 0.0, 8.0));
+            let plain: [crate::geometry::Ray; 8] = std::array::from_fn(|i| {
+                let target = if (case + i) % 7 == 0 { shared } else { turn(random_point(&mut rng, 1.5)) };
+                crate::geometry::Ray::new(o, (target - o).normalize())
             });
+            let rays: [Ray4; 8] = plain.map(|r| Ray4::new(WatertightRay::new(r.o, r.d)));
             let lanes = (rng.next_u32() & 0xff) as u8 | 1;
             let t0: [f32; 8] =
                 std::array::from_fn(|_| if rng.next_f32() < 0.3 { rng.next_f32() * 12.0 } else { f32::INFINITY });
             // SAFETY: AVX2 was detected above.
-            let Some(r8) = (unsafe { Rays8::new(std::array::from_fn(|i| &rays[i]), lanes) }) else { continue };
+            let Some(r8) = (unsafe { Rays8::from_rays(&plain, lanes) }) else {
+                // Only where the lanes' axes differ.
+                let k = rays[lanes.trailing_zeros() as usize].k;
+                assert!((0..8).any(|l| lanes & (1 << l) != 0 && rays[l].k != k), "case {case}");
+                continue;
+            };
             packets += 1;
             let (mut tm, mut best) = (t0, [None; 8]);
             // SAFETY: AVX2 was detected above.
