@@ -508,6 +508,52 @@ mod tests {
         );
     }
 
+    /// [`Rays8::from_rays`] makes the axes, origin and shear [`Ray4::new`] makes, bit for bit,
+    /// on the directions where the choice is delicate: ties between components, signed zeros,
+    /// infinities and NaN; and it declines lanes that permute the axes differently.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn eight_ray_setup_is_the_single_ray_setup() {
+        use std::arch::x86_64::_mm256_storeu_ps;
+        if !crate::accel::has_avx2() {
+            eprintln!("no AVX2: the eight-ray set-up is not used on this CPU");
+            return;
+        }
+        let values = [0.0f32, -0.0, 1.0, -1.0, 0.5, -2.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN];
+        let o = Vec3::new(0.3, -0.2, 0.7);
+        let lanes = |v: std::arch::x86_64::__m256| {
+            let mut out = [0.0f32; 8];
+            // SAFETY: an unaligned store into a local array of eight floats.
+            unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
+            out.map(f32::to_bits)
+        };
+        for x in values {
+            for y in values {
+                for z in values {
+                    let d = Vec3::new(x, y, z);
+                    let want = Ray4::new(WatertightRay::new(o, d));
+                    // SAFETY: AVX2 was detected above.
+                    let got = unsafe { Rays8::from_rays(&[crate::geometry::Ray::new(o, d); 8], 0xff) }
+                        .expect("eight copies of one ray share their axes");
+                    assert_eq!(got.k, want.k.map(usize::from), "direction {d}");
+                    for a in 0..3 {
+                        assert_eq!(lanes(got.o[a]), [want.o[a].to_bits(); 8], "direction {d}, origin {a}");
+                        assert_eq!(lanes(got.s[a]), [want.s[a].to_bits(); 8], "direction {d}, shear {a}");
+                    }
+                }
+            }
+        }
+        let mut rays = [crate::geometry::Ray::new(o, Vec3::new(0.1, 0.2, 1.0)); 8];
+        rays[5].d = Vec3::new(1.0, 0.2, 0.1);
+        // SAFETY: AVX2 was detected above.
+        assert!(unsafe { Rays8::from_rays(&rays, 0xff) }.is_none(), "lane 5 has another dominant axis");
+        // SAFETY: AVX2 was detected above.
+        assert!(unsafe { Rays8::from_rays(&rays, 0xdf) }.is_some(), "lane 5 is not active");
+        rays[5].d = Vec3::new(0.1, 0.2, -1.0);
+        // SAFETY: AVX2 was detected above.
+        assert!(unsafe { Rays8::from_rays(&rays, 0xff) }.is_none(), "lane 5 swaps x and y");
+    }
+
     #[test]
     fn unused_lanes_never_hit() {
         let block = Tri4::pack([]);
