@@ -1860,10 +1860,7 @@ impl Accel for Bvh {
             // SAFETY: `avx` is set only where AVX2 was detected.
             return unsafe { packet::closest16(self, rays, active, t_max, &mut test) };
         }
-        let [t0, t1] = t_max;
-        let h0 = super::lane_by_lane(self, &rays[0], active[0], t0, |leaf, lanes, t| test(0, leaf, lanes, t));
-        let h1 = super::lane_by_lane(self, &rays[1], active[1], t1, |leaf, lanes, t| test(1, leaf, lanes, t));
-        [h0, h1]
+        super::groups_one_by_one(self, rays, active, t_max, test)
     }
 
     fn build(boxes: &[Aabb], params: &BvhParams) -> Self {

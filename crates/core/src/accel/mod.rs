@@ -138,12 +138,9 @@ pub trait Accel: Send + Sync + Sized {
         rays: &[[Ray; 8]; 2],
         active: [u8; 2],
         t_max: &mut [[f32; 8]; 2],
-        mut test: impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
+        test: impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
     ) -> [u8; 2] {
-        let [t0, t1] = t_max;
-        let h0 = self.closest_leaf_packet8(&rays[0], active[0], t0, |leaf, lanes, t| test(0, leaf, lanes, t));
-        let h1 = self.closest_leaf_packet8(&rays[1], active[1], t1, |leaf, lanes, t| test(1, leaf, lanes, t));
-        [h0, h1]
+        groups_one_by_one(self, rays, active, t_max, test)
     }
 
     /// Size and shape of the structure.
@@ -164,6 +161,20 @@ pub(crate) fn lanes(mask: u32) -> impl Iterator<Item = usize> {
             lane
         })
     })
+}
+
+/// [`Accel::closest_leaf_packet16`] as two packets of eight, one after the other.
+pub(crate) fn groups_one_by_one<A: Accel>(
+    accel: &A,
+    rays: &[[Ray; 8]; 2],
+    active: [u8; 2],
+    t_max: &mut [[f32; 8]; 2],
+    mut test: impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
+) -> [u8; 2] {
+    let [t0, t1] = t_max;
+    let h0 = accel.closest_leaf_packet8(&rays[0], active[0], t0, |leaf, lanes, t| test(0, leaf, lanes, t));
+    let h1 = accel.closest_leaf_packet8(&rays[1], active[1], t1, |leaf, lanes, t| test(1, leaf, lanes, t));
+    [h0, h1]
 }
 
 /// [`Accel::closest_leaf_packet8`] one lane at a time.
