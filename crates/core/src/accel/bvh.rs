@@ -884,12 +884,10 @@ struct RayPre {
     /// Every `inv` and `inv_exit` is finite, so that no slab distance is NaN (the ray has no
     /// zero direction component): the test may then take minima and maxima as integers.
     finite: bool,
+    /// The rows of the near and far planes as byte offsets into a node's bounds (read through
+    /// [`RayPre::row`]: base plus offset, no index scaled per node).
     near: [usize; 3],
     far: [usize; 3],
-    /// `near` and `far` as byte offsets of the rows in a node's bounds (the AVX2 test loads
-    /// a row at base plus offset, without scaling an index per node).
-    near_bytes: [usize; 3],
-    far_bytes: [usize; 3],
 }
 
 impl RayPre {
@@ -902,11 +900,18 @@ impl RayPre {
             inv: inv.to_array(),
             inv_exit: inv_exit.to_array(),
             finite: inv_exit.is_finite(),
-            near: [nx, 1 + ny, 2 + nz],
-            far: [3 - nx, 4 - ny, 5 - nz],
-            near_bytes: [nx, 1 + ny, 2 + nz].map(|row| row * ROW_BYTES),
-            far_bytes: [3 - nx, 4 - ny, 5 - nz].map(|row| row * ROW_BYTES),
+            near: [nx, 1 + ny, 2 + nz].map(|row| row * ROW_BYTES),
+            far: [3 - nx, 4 - ny, 5 - nz].map(|row| row * ROW_BYTES),
         }
+    }
+
+    /// The row of `b` at byte offset `offset`, one of `near` or `far`.
+    #[inline(always)]
+    fn row(b: &[[f32; WIDTH]; 6], offset: usize) -> &[f32; WIDTH] {
+        debug_assert!(offset.is_multiple_of(ROW_BYTES) && offset < 6 * ROW_BYTES);
+        // SAFETY: `near` and `far` hold row indices below 6 times the row size (`new`), so the
+        // offset starts a whole row inside `b`.
+        unsafe { &*b.as_ptr().cast::<u8>().add(offset).cast::<[f32; WIDTH]>() }
     }
 }
 
@@ -958,8 +963,14 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
             let mut tf = _mm_set1_ps(t_exit);
             for a in 0..3 {
                 let o = _mm_set1_ps(r.o[a]);
-                let t0 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(b[r.near[a]][h..].as_ptr()), o), _mm_set1_ps(r.inv[a]));
-                let t1 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(b[r.far[a]][h..].as_ptr()), o), _mm_set1_ps(r.inv_exit[a]));
+                let t0 = _mm_mul_ps(
+                    _mm_sub_ps(_mm_loadu_ps(RayPre::row(b, r.near[a])[h..].as_ptr()), o),
+                    _mm_set1_ps(r.inv[a]),
+                );
+                let t1 = _mm_mul_ps(
+                    _mm_sub_ps(_mm_loadu_ps(RayPre::row(b, r.far[a])[h..].as_ptr()), o),
+                    _mm_set1_ps(r.inv_exit[a]),
+                );
                 if r.finite {
                     tn = imax(t0, tn);
                     tf = imin(t1, tf);
@@ -986,8 +997,8 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
             let mut tn = 0.0f32;
             let mut tf = t_exit;
             for a in 0..3 {
-                let t0 = (b[r.near[a]][j] - r.o[a]) * r.inv[a];
-                let t1 = (b[r.far[a]][j] - r.o[a]) * r.inv_exit[a];
+                let t0 = (RayPre::row(b, r.near[a])[j] - r.o[a]) * r.inv[a];
+                let t1 = (RayPre::row(b, r.far[a])[j] - r.o[a]) * r.inv_exit[a];
                 if r.finite {
                     tn = if key(t0) > key(tn) { t0 } else { tn };
                     tf = if key(t1) < key(tf) { t1 } else { tf };
@@ -1040,11 +1051,9 @@ fn slab_avx_with<const INT: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WI
     let mut tf = _mm256_set1_ps(t_max * EXIT_ROUNDING);
     for a in 0..3 {
         let o = _mm256_set1_ps(r.o[a]);
-        // SAFETY: unaligned loads of 8-float rows of `n`: the offsets are row indices below 6
-        // times the row size (`RayPre::new`).
-        let base = b.as_ptr().cast::<u8>();
+        // SAFETY: unaligned loads of 8-float rows of `n`.
         let (lo, hi) = unsafe {
-            (_mm256_loadu_ps(base.add(r.near_bytes[a]).cast()), _mm256_loadu_ps(base.add(r.far_bytes[a]).cast()))
+            (_mm256_loadu_ps(RayPre::row(b, r.near[a]).as_ptr()), _mm256_loadu_ps(RayPre::row(b, r.far[a]).as_ptr()))
         };
         let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, o), _mm256_set1_ps(r.inv[a]));
         let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, o), _mm256_set1_ps(r.inv_exit[a]));
