@@ -9,7 +9,7 @@ use crate::accel::Accel;
 use crate::filter::Filter;
 use crate::image::Image;
 use crate::integrator::{Integrator, RayStats};
-use crate::sampling::{stratified_2d, Sampler, SamplerKind};
+use crate::sampling::{Sampler, SamplerKind, Strata};
 use crate::scene::World;
 use crate::Rgb;
 
@@ -154,6 +154,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
     let splat = settings.reconstruction == Reconstruction::Splat;
     // Splatting: how far beyond its tile a sample's filter reaches, in pixels.
     let m = if splat { ((settings.filter.radius() - 0.5).max(0.0).ceil() as u32).min(MAX_SPLAT_MARGIN) } else { 0 };
+    let strata = Strata::new(settings.spp);
     let work = || {
         tiles
             .par_iter()
@@ -165,10 +166,20 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                 let mut acc = vec![Accum::default(); bw * (y1 - y0 + 2 * m) as usize];
                 for y in y0..y1 {
                     for x in x0..x1 {
-                        render_pixel(world, integrator, settings, x, y, &mut stats, &mut |film, sample| {
+                        render_pixel(world, integrator, settings, &strata, x, y, &mut stats, &mut |film, sample| {
+                            let own = (y + m - y0) as usize * bw + (x + m - x0) as usize;
                             if !splat {
-                                let i = (y - y0) as usize * bw + (x - x0) as usize;
-                                acc[i].add(&sample, 1.0);
+                                acc[own].add(&sample, 1.0);
+                                return;
+                            }
+                            if m == 0 {
+                                // A filter within the pixel (the box): the sample's own pixel
+                                // only, as the loops below would weigh it.
+                                let wx = settings.filter.eval_1d(film.x - (x as f32 + 0.5));
+                                let wy = settings.filter.eval_1d(film.y - (y as f32 + 0.5));
+                                if wy != 0.0 && wx * wy != 0.0 {
+                                    acc[own].add(&sample, wx * wy);
+                                }
                                 return;
                             }
                             let (lo_x, hi_x) = (x.saturating_sub(m), (x + m).min(w - 1));
@@ -232,10 +243,12 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
 /// Traces the samples of pixel `(x, y)`, handing each one's film position and radiance to
 /// `sink`. Camera rays go eight at a time, as a packet ([`World::intersect_packet8`]), which
 /// finds for each exactly the hit it finds alone, where the world traces packets together.
+#[allow(clippy::too_many_arguments)]
 fn render_pixel<A: Accel, I: Integrator>(
     world: &World<A>,
     integrator: &I,
     s: &RenderSettings,
+    strata: &Strata,
     x: u32,
     y: u32,
     stats: &mut RayStats,
@@ -248,7 +261,7 @@ fn render_pixel<A: Accel, I: Integrator>(
         let mut samplers: [Option<Sampler>; 8] = std::array::from_fn(|_| None);
         let (mut film, mut lens) = ([Vec2::ZERO; 8], [Vec2::ZERO; 8]);
         for k in 0..n {
-            let (sampler, f, l) = camera_film(world, s, x, y, pixel, key, first + k as u32);
+            let (sampler, f, l) = camera_film(world, s, strata, x, y, pixel, key, first + k as u32);
             (samplers[k], film[k], lens[k]) = (Some(sampler), f, l);
         }
         // The eight rays at once (`Camera::rays8`, the same rays as one at a time); lanes past
@@ -282,9 +295,11 @@ fn render_pixel<A: Accel, I: Integrator>(
 
 /// Camera sample `i` of a pixel without its ray: its sampler (past the camera's dimensions),
 /// film position and lens sample.
+#[allow(clippy::too_many_arguments)]
 fn camera_film<A: Accel>(
     world: &World<A>,
     s: &RenderSettings,
+    strata: &Strata,
     x: u32,
     y: u32,
     pixel: u64,
@@ -295,11 +310,11 @@ fn camera_film<A: Accel>(
     let (film_u, lens_u) = match s.sampler {
         SamplerKind::Independent => {
             let rng = sampler.rng();
-            let film = stratified_2d(i, s.spp, key, rng);
+            let film = strata.sample(i, key, rng);
             // Cameras without a lens ignore the lens sample: its draw only advances the stream
-            // (by the one 2D draw `stratified_2d` makes), without stratifying it.
+            // (by the one 2D draw a stratified sample makes), without stratifying it.
             let lens = if world.scene.camera.has_lens() {
-                stratified_2d(i, s.spp, key ^ 0x5bd1_e995, rng)
+                strata.sample(i, key ^ 0x5bd1_e995, rng)
             } else {
                 rng.next_2d();
                 Vec2::ZERO
@@ -370,7 +385,7 @@ mod tests {
                     let key = (crate::sampling::mix64(settings.seed ^ pixel) >> 32) as u32;
                     let (mut sum, mut n) = (Rgb::ZERO, 0.0f32);
                     for i in 0..settings.spp {
-                        let (mut sampler, film, lens) = camera_film(w, &settings, x, y, pixel, key, i);
+                        let (mut sampler, film, lens) = camera_film(w, &settings, &Strata::new(settings.spp), x, y, pixel, key, i);
                         let ray = w.scene.camera.ray(film, settings.width, settings.height, lens);
                         let hit = w.intersect(&ray, f32::INFINITY);
                         lit += usize::from(hit.is_some());

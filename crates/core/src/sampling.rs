@@ -151,7 +151,11 @@ fn to_unit(v: u32) -> f32 {
 impl Sampler {
     /// The generator for sample `index` of `spp` at `pixel`.
     pub fn new(kind: SamplerKind, seed: u64, pixel: u64, index: u32, spp: u32) -> Sampler {
-        let key = mix64(seed ^ mix64(pixel.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ 0x5851_f42d));
+        // The scramble key serves the Sobol points only.
+        let key = match kind {
+            SamplerKind::Sobol => mix64(seed ^ mix64(pixel.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ 0x5851_f42d)),
+            SamplerKind::Independent => 0,
+        };
         Sampler { kind, rng: Pcg32::for_sample(seed, pixel, index as u64), key, index, spp: spp.max(1), dim: 0 }
     }
 
@@ -200,16 +204,27 @@ impl Sampler {
 
 /// Kensler's hash-based permutation of `0..n` ("Correlated Multi-Jittered Sampling", 2013):
 /// `permute(i, n, key)` for `i in 0..n` visits each of `0..n` exactly once.
-pub fn permute(mut i: u32, n: u32, key: u32) -> u32 {
-    if n <= 1 {
-        return 0;
-    }
-    let mut w = n - 1;
+pub fn permute(i: u32, n: u32, key: u32) -> u32 {
+    permute_within(i, n, mask_of(n), key)
+}
+
+/// The smallest all-ones mask covering `0..n` (what [`permute`] hashes within).
+fn mask_of(n: u32) -> u32 {
+    let mut w = n.saturating_sub(1);
     w |= w >> 1;
     w |= w >> 2;
     w |= w >> 4;
     w |= w >> 8;
     w |= w >> 16;
+    w
+}
+
+/// [`permute`] with `w = mask_of(n)` worked out by the caller.
+#[inline(always)]
+fn permute_within(mut i: u32, n: u32, w: u32, key: u32) -> u32 {
+    if n <= 1 {
+        return 0;
+    }
     loop {
         i ^= key;
         i = i.wrapping_mul(0xe170_893d);
@@ -251,17 +266,40 @@ fn div_rem(a: u32, n: u32) -> (u32, u32) {
 /// Sample `i` of `n` stratified in 2D: a jittered grid when `n` is a square, otherwise a Latin
 /// hypercube (one sample per row and per column), with a `key`-dependent pairing of the strata.
 pub fn stratified_2d(i: u32, n: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
-    let j = rng.next_2d();
-    let k = (n as f32).sqrt() as u32;
-    if k * k == n {
-        let cell = permute(i, n, key);
-        let (row, col) = div_rem(cell, k);
-        Vec2::new((col as f32 + j.x) / k as f32, (row as f32 + j.y) / k as f32)
-    } else {
-        let row = permute(i, n, key);
-        Vec2::new((i as f32 + j.x) / n as f32, (row as f32 + j.y) / n as f32)
+    Strata::new(n).sample(i, key, rng)
+}
+
+/// The strata of [`stratified_2d`] for `n` samples, worked out once for all of them (the
+/// renderer draws every camera sample from the same `n`).
+#[derive(Clone, Copy, Debug)]
+pub struct Strata {
+    n: u32,
+    /// The grid's side where `n` is a square, otherwise 0 (a Latin hypercube).
+    side: u32,
+    /// [`permute`]'s mask for `n`.
+    mask: u32,
+}
+
+impl Strata {
+    pub fn new(n: u32) -> Strata {
+        let k = (n as f32).sqrt() as u32;
+        Strata { n, side: if k * k == n { k } else { 0 }, mask: mask_of(n) }
     }
-    .min(Vec2::splat(1.0 - f32::EPSILON / 2.0))
+
+    /// Sample `i` (of `n`): [`stratified_2d`]`(i, n, key, rng)`.
+    #[inline]
+    pub fn sample(&self, i: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
+        let j = rng.next_2d();
+        let (n, k) = (self.n, self.side);
+        let cell = permute_within(i, n, self.mask, key);
+        if k != 0 {
+            let (row, col) = div_rem(cell, k);
+            Vec2::new((col as f32 + j.x) / k as f32, (row as f32 + j.y) / k as f32)
+        } else {
+            Vec2::new((i as f32 + j.x) / n as f32, (cell as f32 + j.y) / n as f32)
+        }
+        .min(Vec2::splat(1.0 - f32::EPSILON / 2.0))
+    }
 }
 
 /// Uniform point on the unit disk (Shirley–Chiu concentric map).

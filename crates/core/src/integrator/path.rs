@@ -66,13 +66,10 @@ impl Integrator for Path {
         let mut prev_p = ray.o;
         let mut eta_scale = 1.0f32;
         let mut depth = 0u32;
-        let mut first = Some(first);
+        // The camera ray's hit comes with it; each later one is found at the end of the loop.
+        let mut next = first;
         loop {
-            let hit = match first.take() {
-                Some(camera_hit) => camera_hit,
-                None => world.intersect(&ray, f32::INFINITY),
-            };
-            let Some(hit) = hit else {
+            let Some(hit) = next else {
                 l += beta * scene.background;
                 if let Some((li, env)) = world.environment() {
                     let w = if prev_delta {
@@ -181,6 +178,7 @@ impl Integrator for Path {
             if beta.max_element() <= 0.0 || !beta.is_finite() {
                 break;
             }
+            next = world.intersect(&ray, f32::INFINITY);
         }
         l
     }
