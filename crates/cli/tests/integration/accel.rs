@@ -9,8 +9,8 @@ use snell_core::camera::{Camera, Projection};
 use snell_core::geometry::{Ray, Transform};
 use snell_core::material::Material;
 use snell_core::sampling::Pcg32;
-use snell_core::scene::{Geometry, Object, Scene, World};
-use snell_core::shape::{Mesh, Sphere};
+use snell_core::scene::{Geometry, Object, RawHit, Scene, World};
+use snell_core::shape::{intersect_triangle, Mesh, Sphere, WatertightRay};
 use snell_core::Rgb;
 
 fn rand_vec(rng: &mut Pcg32, scale: f32) -> Vec3 {
@@ -371,10 +371,40 @@ fn traversal_counts_and_structure_boxes() {
     }
 }
 
+/// Whether a packet's hit `got` for ray `r` is the hit `want` the ray finds alone (distance,
+/// object, triangle and barycentrics, bit for bit), or an exact tie: the same distance on
+/// another triangle that the ray alone hits at exactly that distance (a ray through a vertex or
+/// an edge that triangles in different leaves share; which of them comes first depends on the
+/// order the leaves are visited in, which a packet's other rays can change).
+fn same_or_tie(scene: &Scene, r: &Ray, want: Option<RawHit>, got: Option<RawHit>) -> bool {
+    let key = |h: RawHit| (h.t.to_bits(), h.object, h.prim, h.b1.to_bits(), h.b2.to_bits());
+    match (want, got) {
+        (None, None) => true,
+        (Some(a), Some(b)) if key(a) == key(b) => true,
+        (Some(a), Some(b)) if a.t.to_bits() == b.t.to_bits() && (a.object, a.prim) != (b.object, b.prim) => {
+            let o = &scene.objects[b.object as usize];
+            match (&scene.geometries[o.geometry], &o.transform) {
+                (Geometry::Mesh(m), None) => {
+                    let [p0, p1, p2] = m.triangle(b.prim as usize);
+                    let alone = intersect_triangle(&WatertightRay::new(r.o, r.d), p0, p1, p2, f32::INFINITY);
+                    alone.is_some_and(|h| {
+                        (h.t.to_bits(), h.b1.to_bits(), h.b2.to_bits())
+                            == (b.t.to_bits(), b.b1.to_bits(), b.b2.to_bits())
+                    })
+                }
+                _ => false,
+            }
+        }
+        _ => false,
+    }
+}
+
 /// Packets of eight and of sixteen rays (coherent camera rays, perspective and orthographic,
-/// and incoherent random ones) get exactly the hits that each ray gets alone, for every accelerator (the BVHs' AVX2 packet traversal where the
+/// and incoherent random ones) get the hits that each ray gets alone (or an exact tie, see
+/// [`same_or_tie`]), for every accelerator (the BVHs' AVX2 packet traversal where the
 /// CPU has it, one by one elsewhere), on a single mesh (where packets are used) and on the
-/// two-level adversarial scene and a small mesh (where they fall back to single rays).
+/// two-level adversarial scene and a small mesh (where they fall back to single rays), rays
+/// grazing the mesh's box included.
 #[test]
 fn ray_packets_hit_what_single_rays_hit() {
     let mut mesh = Mesh::icosphere(4);
@@ -403,9 +433,48 @@ fn ray_packets_hit_what_single_rays_hit() {
     let small = Mesh::cuboid(Vec3::splat(-1.2), Vec3::new(1.0, 0.8, 1.1));
     let small =
         Scene { geometries: vec![Geometry::Mesh(small)], objects: vec![object(0, None)], ..adversarial_scene(1) };
-    for (name, scene) in [("mesh", single), ("small mesh", small), ("two-level", adversarial_scene(2))] {
+    // A cube with a few triangles inside, too many for one leaf: its faces lie on its box.
+    let mut cube = Mesh::cuboid(Vec3::new(-1.0, -0.75, -0.5), Vec3::new(1.25, 1.0, 0.75));
+    for k in 0..8 {
+        let c = Vec3::new(0.1 * k as f32 - 0.4, 0.05 * k as f32, -0.1);
+        let n = cube.positions.len() as u32;
+        cube.positions.extend([c, c + Vec3::new(0.2, 0.0, 0.0), c + Vec3::new(0.0, 0.2, 0.1)]);
+        cube.indices.push([n, n + 1, n + 2]);
+    }
+    let cube = Scene { geometries: vec![Geometry::Mesh(cube)], objects: vec![object(0, None)], ..adversarial_scene(1) };
+    for (name, scene) in [("mesh", single), ("cube", cube), ("small mesh", small), ("two-level", adversarial_scene(2))]
+    {
         let mut all = coherent.clone();
         all.extend(rays(&scene, 800, 5));
+        // Rays grazing the whole mesh's box (a packet that misses the box is not traced): aimed
+        // from outside at the vertices on its faces, and touching it at one corner or at one
+        // point of an edge only (where the cube's triangles meet the box).
+        if let Geometry::Mesh(m) = &scene.geometries[0] {
+            let b = m.aabb();
+            for v in m.positions.iter().filter(|v| (0..3).any(|a| v[a] == b.min[a] || v[a] == b.max[a])) {
+                for o in [Vec3::new(0.3, 0.4, 3.0), Vec3::new(-4.0, 0.1, 0.2), Vec3::new(0.5, -3.5, -2.0)] {
+                    all.push(Ray::new(o, *v - o));
+                }
+            }
+            for c in b.corners() {
+                // +1 along an axis where the corner is on the box's max side.
+                let out = Vec3::from_array(std::array::from_fn(|a| if c[a] == b.max[a] { 1.0 } else { -1.0 }));
+                for leave in 0..3 {
+                    // Inwards along two axes, outwards along the third: the ray meets the box at
+                    // the corner only.
+                    let d = Vec3::from_array(std::array::from_fn(|a| if a == leave { out[a] } else { -out[a] }));
+                    all.push(Ray::new(c - d, d));
+                    // Along an edge from the corner: touching it halfway, inwards along one
+                    // axis and outwards along another.
+                    let (i, o) = ((leave + 1) % 3, (leave + 2) % 3);
+                    let mut p = c;
+                    p[leave] = 0.5 * (b.min[leave] + b.max[leave]);
+                    let mut d = Vec3::ZERO;
+                    (d[i], d[o]) = (-out[i], out[o]);
+                    all.push(Ray::new(p - d, d));
+                }
+            }
+        }
         for kind in AccelKind::ALL {
             let world = kind.build_world(&scene, &AccelParams::default());
             let (hits, checked) = snell_core::with_world!(&world, w => {
@@ -421,11 +490,7 @@ fn ray_packets_hit_what_single_rays_hit() {
                             continue;
                         }
                         let want = w.hit(r, f32::INFINITY);
-                        assert_eq!(
-                            want.map(|h| (h.t.to_bits(), h.object, h.prim)),
-                            g.map(|h| (h.t.to_bits(), h.object, h.prim)),
-                            "{name} {kind:?}"
-                        );
+                        assert!(same_or_tie(&scene, r, want, g), "{name} {kind:?}: {want:?} alone, {g:?} in a packet");
                         hits += usize::from(want.is_some());
                         checked += 1;
                     }
@@ -446,10 +511,9 @@ fn ray_packets_hit_what_single_rays_hit() {
                                 continue;
                             }
                             let want = w.hit(r, f32::INFINITY);
-                            assert_eq!(
-                                want.map(|h| (h.t.to_bits(), h.object, h.prim, h.b1.to_bits(), h.b2.to_bits())),
-                                h.map(|h| (h.t.to_bits(), h.object, h.prim, h.b1.to_bits(), h.b2.to_bits())),
-                                "{name} {kind:?}: sixteen-ray packet {k}, lane {g}.{lane}"
+                            assert!(
+                                same_or_tie(&scene, r, want, h),
+                                "{name} {kind:?}: sixteen-ray packet {k}, lane {g}.{lane}: {want:?} alone, {h:?}"
                             );
                         }
                     }

@@ -1390,6 +1390,25 @@ mod packet {
         (tn, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32)
     }
 
+    /// Whether every ray of `active` misses the whole tree's box, so that no node need be
+    /// looked at (a packet of camera rays beside the mesh). Conservative: the exit distance is
+    /// rounded up twice over, beyond any rounding of the nodes' own tests of the boxes inside
+    /// it, and the rays' `t_max` is left out.
+    #[target_feature(enable = "avx2")]
+    fn misses_tree(bvh: &Bvh, r: &Rays8, active: u8) -> bool {
+        let b = &bvh.root_box;
+        let mut tn = _mm256_setzero_ps();
+        let mut tf = _mm256_set1_ps(f32::INFINITY);
+        for a in 0..3 {
+            let t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b.min[a]), r.o[a]), r.inv[a]);
+            let t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b.max[a]), r.o[a]), r.inv[a]);
+            tn = _mm256_max_ps(_mm256_blendv_ps(t0, t1, r.neg[a]), tn);
+            tf = _mm256_min_ps(_mm256_blendv_ps(t1, t0, r.neg[a]), tf);
+        }
+        let tf = _mm256_mul_ps(tf, _mm256_set1_ps(EXIT_ROUNDING * EXIT_ROUNDING));
+        _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u8 & active == 0
+    }
+
     /// A node's children that a packet enters, `(reference, lanes, entry distance)`, kept in
     /// order of decreasing distance (the nearest is pushed last and popped first).
     #[derive(Default)]
@@ -1675,6 +1694,9 @@ mod packet {
         let mut hits = [0u8; 2];
         if !bvh.root_leaf && !bvh.nodes.is_empty() {
             let r = [load(&rays[0]), load(&rays[1])];
+            if misses_tree(bvh, &r[0], active[0]) && misses_tree(bvh, &r[1], active[1]) {
+                return hits;
+            }
             let frustum = match (Ranges::new(&r[0], active[0]), Ranges::new(&r[1], active[1])) {
                 (Some(a), Some(b)) => a.union(b).and_then(|g| Frustum::of(g)),
                 _ => None,
@@ -1718,6 +1740,9 @@ mod packet {
             return 0;
         }
         let r = load(rays);
+        if misses_tree(bvh, &r, active) {
+            return 0;
+        }
         if let Some(f) = Frustum::new(&r, active) {
             let mut leaf =
                 |leaf: u32, mask: u32, t_max: &mut [[f32; 8]; 1]| hits |= test(leaf, mask as u8, &mut t_max[0]);
