@@ -401,6 +401,8 @@ impl TriData {
         let labels: Option<Vec<u32>> =
             if ranges.len() > 1 { ranges.iter().map(|&(a, b)| label_of_range(a, b)).collect() } else { None };
         let labelled = labels.is_some_and(|l| accel.relabel_leaves(&l));
+        // Labelled leaves carry their ranges themselves.
+        let ranges = if labelled { Vec::new() } else { ranges };
         TriData::Leaves { blocks, ranges, labelled }
     }
 

@@ -2028,6 +2028,9 @@ impl Accel for Bvh {
             self.root_ref = LEAF | labels[0];
         }
         self.relabeled = true;
+        // Nothing reads the leaves' primitive lists any more: the labels stand for them.
+        (self.leaves, self.prims) = (Vec::new(), Vec::new());
+        self.stats.bytes = self.nodes.len() * std::mem::size_of::<Wide>();
         true
     }
 

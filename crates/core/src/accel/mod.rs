@@ -85,8 +85,10 @@ pub trait Accel: Send + Sync + Sized {
     /// `labels[leaf]`: a caller can put there what it would otherwise look up per leaf (the
     /// triangle blocks' range, say), which saves a dependent memory access on every leaf a ray
     /// reaches. Labels must be below `2^31 - 1`. Returns false, changing nothing, where the
-    /// structure has no leaves of its own (the default) or a label does not fit.
-    /// [`Accel::leaves`] keeps its numbering.
+    /// structure has no leaves of its own (the default) or a label does not fit. The caller
+    /// has laid out what the leaves hold by then: a structure may free its own lists of the
+    /// leaves' primitives, after which [`Accel::leaves`] gives none (and primitive-level
+    /// queries are not available).
     fn relabel_leaves(&mut self, _labels: &[u32]) -> bool {
         false
     }
