@@ -853,9 +853,10 @@ impl<'s, A: Accel> World<'s, A> {
     /// as camera rays): the same hits as [`World::hit`] gives each ray (None for lanes not
     /// active), but for exact ties: where a ray meets triangles in different leaves at one
     /// distance (through a vertex or an edge they share), the first found wins, and a packet
-    /// may visit those leaves in another order than the ray alone. Packets pay for a single untransformed mesh, whose leaves are blocks of four
-    /// triangles, and for a top level whose leaves are objects (each ray then tests the
-    /// objects it reaches alone); other scenes trace the rays one by one.
+    /// may visit those leaves in another order than the ray alone. Packets pay for a single
+    /// untransformed mesh, whose leaves are blocks of four triangles, and for a top level
+    /// whose leaves are objects (each ray then tests the objects it reaches alone); other
+    /// scenes trace the rays one by one.
     pub fn hit_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<RawHit>; 8] {
         if !self.packets {
             return std::array::from_fn(|i| {

@@ -1374,20 +1374,26 @@ mod packet {
     /// NaN ignored, exit rounded up).
     #[target_feature(enable = "avx2")]
     fn slab8(bounds: &[[f32; WIDTH]; 6], j: usize, r: &Rays8, t_max: __m256) -> (__m256, u32) {
+        let (lo, hi) = (std::array::from_fn(|a| bounds[a][j]), std::array::from_fn(|a| bounds[3 + a][j]));
+        let (tn, tf) = entry_exit(lo, hi, r, t_max);
+        let tf = _mm256_mul_ps(tf, _mm256_set1_ps(EXIT_ROUNDING));
+        (tn, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32)
+    }
+
+    /// The eight rays' entry and exit distances of the box `lo`..`hi` within `[0, t_max]`, the
+    /// exit not yet rounded up: near plane by the direction's sign, NaN distances ignored.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn entry_exit(lo: [f32; 3], hi: [f32; 3], r: &Rays8, t_max: __m256) -> (__m256, __m256) {
         let mut tn = _mm256_setzero_ps();
         let mut tf = t_max;
         for a in 0..3 {
-            let lo = _mm256_set1_ps(bounds[a][j]);
-            let hi = _mm256_set1_ps(bounds[3 + a][j]);
-            let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, r.o[a]), r.inv[a]);
-            let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, r.o[a]), r.inv[a]);
-            let near = _mm256_blendv_ps(t0, t1, r.neg[a]);
-            let far = _mm256_blendv_ps(t1, t0, r.neg[a]);
-            tn = _mm256_max_ps(near, tn);
-            tf = _mm256_min_ps(far, tf);
+            let t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(lo[a]), r.o[a]), r.inv[a]);
+            let t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(hi[a]), r.o[a]), r.inv[a]);
+            tn = _mm256_max_ps(_mm256_blendv_ps(t0, t1, r.neg[a]), tn);
+            tf = _mm256_min_ps(_mm256_blendv_ps(t1, t0, r.neg[a]), tf);
         }
-        let tf = _mm256_mul_ps(tf, _mm256_set1_ps(EXIT_ROUNDING));
-        (tn, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32)
+        (tn, tf)
     }
 
     /// Whether every ray of `active` misses the whole tree's box, so that no node need be
@@ -1397,14 +1403,7 @@ mod packet {
     #[target_feature(enable = "avx2")]
     fn misses_tree(bvh: &Bvh, r: &Rays8, active: u8) -> bool {
         let b = &bvh.root_box;
-        let mut tn = _mm256_setzero_ps();
-        let mut tf = _mm256_set1_ps(f32::INFINITY);
-        for a in 0..3 {
-            let t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b.min[a]), r.o[a]), r.inv[a]);
-            let t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b.max[a]), r.o[a]), r.inv[a]);
-            tn = _mm256_max_ps(_mm256_blendv_ps(t0, t1, r.neg[a]), tn);
-            tf = _mm256_min_ps(_mm256_blendv_ps(t1, t0, r.neg[a]), tf);
-        }
+        let (tn, tf) = entry_exit(b.min.to_array(), b.max.to_array(), r, _mm256_set1_ps(f32::INFINITY));
         let tf = _mm256_mul_ps(tf, _mm256_set1_ps(EXIT_ROUNDING * EXIT_ROUNDING));
         _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u8 & active == 0
     }
