@@ -927,13 +927,6 @@ impl<'s, A: Accel> World<'s, A> {
         })
     }
 
-    /// [`World::intersect`] for the `active` ones of eight rays, traced as a packet
-    /// ([`World::hit_packet8`]).
-    pub fn intersect_packet8(&self, rays: &[Ray; 8], active: u8) -> [Option<Intersection>; 8] {
-        let hits = self.hit_packet8(rays, active);
-        std::array::from_fn(|i| hits[i].map(|h| self.interaction(&rays[i], &h)))
-    }
-
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         let mut shared = None;
@@ -962,8 +955,9 @@ impl<'s, A: Accel> World<'s, A> {
         }
     }
 
-    /// Everything shading needs about the hit `h` of `ray`.
-    fn interaction(&self, ray: &Ray, h: &RawHit) -> Intersection {
+    /// Everything shading needs about the hit `h` of `ray` (as [`World::hit`] or a packet query
+    /// finds it).
+    pub fn interaction(&self, ray: &Ray, h: &RawHit) -> Intersection {
         let RawHit { t, object: obj, prim, b1, b2 } = *h;
         let o = &self.scene.objects[obj as usize];
         let (p, mut ng, mut ns, uv) = match &self.scene.geometries[o.geometry] {

@@ -18,6 +18,7 @@ use crate::material::Frame;
 use crate::sampling::Sampler;
 use crate::scene::{Intersection, World};
 use crate::Rgb;
+use glam::Vec3A;
 
 /// Path tracing with next-event estimation and MIS.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -57,32 +58,37 @@ impl Integrator for Path {
         stats: &mut RayStats,
     ) -> Rgb {
         let scene = world.scene;
-        let mut l = Rgb::ZERO;
-        let mut beta = Rgb::ONE;
-        let mut ray = *camera_ray;
+        // The sums run in 16-byte lanes (the same arithmetic per channel as `Rgb`): a 12-byte
+        // value kept on the stack is stored in two pieces and, read back whole, stalls.
+        let mut l = Vec3A::ZERO;
+        let mut beta = Vec3A::ONE;
+        // The direction of the path's current segment. Kept by itself: the segment's ray is
+        // needed only to trace it, and a copy of the camera ray made here would be read back
+        // in other pieces than it was written (a store-forwarding stall).
+        let mut dir = camera_ray.d;
         // The BSDF pdf of the last bounce and whether it was a delta lobe (the camera counts
         // as one: what it sees directly is not light-sampled).
         let (mut prev_pdf, mut prev_delta) = (0.0f32, true);
-        let mut prev_p = ray.o;
+        let mut prev_p = camera_ray.o;
         let mut eta_scale = 1.0f32;
         let mut depth = 0u32;
         // The camera ray's hit comes with it; each later one is found at the end of the loop.
         let mut next = first;
         loop {
             let Some(hit) = next else {
-                l += beta * scene.background;
+                l += beta * Vec3A::from(scene.background);
                 if let Some((li, env)) = world.environment() {
                     let w = if prev_delta {
                         1.0
                     } else {
-                        power_heuristic(prev_pdf, world.light_probability(li) * env.pdf(ray.d))
+                        power_heuristic(prev_pdf, world.light_probability(li) * env.pdf(dir))
                     };
-                    l += beta * env.eval(ray.d) * w;
+                    l += beta * Vec3A::from(env.eval(dir)) * w;
                 }
                 break;
             };
             let obj = &scene.objects[hit.object as usize];
-            let wo_world = (-ray.d).normalize();
+            let wo_world = (-dir).normalize();
             let front = wo_world.dot(hit.ng) > 0.0;
             if front && obj.emission != Rgb::ZERO {
                 let w = match (prev_delta, world.light_of(hit.object)) {
@@ -92,7 +98,7 @@ impl Integrator for Path {
                     }
                     _ => 1.0,
                 };
-                l += beta * obj.emission * w;
+                l += beta * Vec3A::from(obj.emission) * w;
             }
             if depth + 1 >= self.max_depth {
                 break;
@@ -138,7 +144,7 @@ impl Integrator for Path {
                                 } else {
                                     1.0
                                 };
-                                l += beta * f * ls.value * (w / p_choose);
+                                l += beta * Vec3A::from(f) * Vec3A::from(ls.value) * (w / p_choose);
                             }
                         }
                     }
@@ -155,7 +161,7 @@ impl Integrator for Path {
             if crosses != (bs.wi.z * wo.z < 0.0) {
                 break;
             }
-            beta *= bs.weight;
+            beta *= Vec3A::from(bs.weight);
             // Russian roulette takes the 1/η² of refraction back out of the throughput, so that
             // paths inside glass are not killed for it.
             let eta = bsdf.eta_across(wo, bs.wi);
@@ -166,7 +172,8 @@ impl Integrator for Path {
             } else {
                 stats.reflection += 1;
             }
-            ray = spawn_ray(hit.p, ng, wi_world);
+            let ray = spawn_ray(hit.p, ng, wi_world);
+            dir = ray.d;
             depth += 1;
             if depth >= self.rr_depth {
                 let q = (beta.max_element() * eta_scale).min(0.95);
@@ -180,7 +187,7 @@ impl Integrator for Path {
             }
             next = world.intersect(&ray, f32::INFINITY);
         }
-        l
+        l.into()
     }
 }
 
