@@ -278,12 +278,17 @@ pub struct Strata {
     side: u32,
     /// [`permute`]'s mask for `n`.
     mask: u32,
+    /// `1 / side` (or `1 / n` for a Latin hypercube) where that divisor is a power of two, so
+    /// that multiplying by it gives exactly the quotient; otherwise 0 (divide).
+    inv: f32,
 }
 
 impl Strata {
     pub fn new(n: u32) -> Strata {
         let k = (n as f32).sqrt() as u32;
-        Strata { n, side: if k * k == n { k } else { 0 }, mask: mask_of(n) }
+        let side = if k * k == n { k } else { 0 };
+        let d = if side != 0 { side } else { n };
+        Strata { n, side, mask: mask_of(n), inv: if d.is_power_of_two() { 1.0 / d as f32 } else { 0.0 } }
     }
 
     /// Sample `i` (of `n`): [`stratified_2d`]`(i, n, key, rng)`.
@@ -292,13 +297,16 @@ impl Strata {
         let j = rng.next_2d();
         let (n, k) = (self.n, self.side);
         let cell = permute_within(i, n, self.mask, key);
-        if k != 0 {
+        let (x, y, d) = if k != 0 {
             let (row, col) = div_rem(cell, k);
-            Vec2::new((col as f32 + j.x) / k as f32, (row as f32 + j.y) / k as f32)
+            (col as f32 + j.x, row as f32 + j.y, k as f32)
         } else {
-            Vec2::new((i as f32 + j.x) / n as f32, (cell as f32 + j.y) / n as f32)
-        }
-        .min(Vec2::splat(1.0 - f32::EPSILON / 2.0))
+            (i as f32 + j.x, cell as f32 + j.y, n as f32)
+        };
+        // A multiply where it is exact (a power-of-two divisor: the usual sample counts), as
+        // the division's latency sits on the path of every camera sample.
+        let v = if self.inv != 0.0 { Vec2::new(x, y) * self.inv } else { Vec2::new(x, y) / d };
+        v.min(Vec2::splat(1.0 - f32::EPSILON / 2.0))
     }
 }
 

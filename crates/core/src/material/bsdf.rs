@@ -258,6 +258,10 @@ impl Bsdf<'_> {
     }
 
     /// Samples `wi` for `wo`; `uc` chooses the lobe and `u` the direction (both uniform).
+    ///
+    /// Inlined: returned through memory, the sample was read back in other pieces than it
+    /// was written, a store-forwarding stall (inlining made a Cornell box render 4 % faster).
+    #[inline(always)]
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
         match *self {
             Bsdf::Diffuse { albedo } => {
