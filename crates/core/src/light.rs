@@ -131,8 +131,8 @@ impl Environment {
             None => {
                 let z = 1.0 - 2.0 * u.x;
                 let r = (1.0 - z * z).max(0.0).sqrt();
-                let phi = 2.0 * PI * u.y;
-                (Vec3::new(r * phi.cos(), r * phi.sin(), z), 1.0 / (4.0 * PI))
+                let (cos_p, sin_p) = crate::sampling::cos_sin_turn(u.y);
+                (Vec3::new(r * cos_p, r * sin_p, z), 1.0 / (4.0 * PI))
             }
             Some(dist) => {
                 let (uv, pdf_uv) = dist.sample(u);

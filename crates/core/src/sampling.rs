@@ -310,26 +310,56 @@ impl Strata {
     }
 }
 
+/// `(sin x, cos x)` for `|x| ≤ π/4`, by the minimax polynomials of Cephes' `sinf` and `cosf`
+/// for that interval (within 2·10⁻⁷ of the true values; no range reduction, no call). Sampling
+/// needs sines and cosines of angles it makes itself, whose range it knows: libm's `sincosf`
+/// was 3 % of a Cornell box render.
+#[inline]
+pub fn sin_cos_octant(x: f32) -> (f32, f32) {
+    let z = x * x;
+    let s = ((-1.951_529_6e-4 * z + 8.332_161e-3) * z - 1.666_665_5e-1) * z * x + x;
+    let c = ((2.443_315_7e-5 * z - 1.388_731_6e-3) * z + 4.166_664_6e-2) * z * z - 0.5 * z + 1.0;
+    (s, c)
+}
+
+/// `(cos 2πu, sin 2πu)` for `u` in `[0, 1]`: the nearest quarter turn is taken out exactly
+/// (`4u − q` has no rounding error) and the rest is an angle of at most π/4.
+#[inline]
+pub fn cos_sin_turn(u: f32) -> (f32, f32) {
+    let t = 4.0 * u;
+    let q = t.round();
+    let (s, c) = sin_cos_octant((t - q) * std::f32::consts::FRAC_PI_2);
+    match q as i32 & 3 {
+        0 => (c, s),
+        1 => (-s, c),
+        2 => (-c, -s),
+        _ => (s, -c),
+    }
+}
+
 /// Uniform point on the unit disk (Shirley–Chiu concentric map).
 pub fn concentric_disk(u: Vec2) -> Vec2 {
     let o = 2.0 * u - Vec2::ONE;
     if o == Vec2::ZERO {
         return Vec2::ZERO;
     }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, std::f32::consts::FRAC_PI_4 * (o.y / o.x))
+    // θ = π/4 · (y/x) for the left and right wedges, π/2 − π/4 · (x/y) for the others, whose
+    // cosine and sine are the sine and cosine of π/4 · (x/y).
+    if o.x.abs() > o.y.abs() {
+        let (s, c) = sin_cos_octant(std::f32::consts::FRAC_PI_4 * (o.y / o.x));
+        o.x * Vec2::new(c, s)
     } else {
-        (o.y, std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y))
-    };
-    r * Vec2::new(theta.cos(), theta.sin())
+        let (s, c) = sin_cos_octant(std::f32::consts::FRAC_PI_4 * (o.x / o.y));
+        o.y * Vec2::new(s, c)
+    }
 }
 
 /// Direction uniform within the cone of half-angle `acos(cos_max)` about +z; pdf `1/(2π(1-cos_max))`.
 pub fn uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
     let cos_t = (1.0 - u.x) + u.x * cos_max;
     let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-    let phi = u.y * std::f32::consts::TAU;
-    Vec3::new(phi.cos() * sin_t, phi.sin() * sin_t, cos_t)
+    let (cos_p, sin_p) = cos_sin_turn(u.y);
+    Vec3::new(cos_p * sin_t, sin_p * sin_t, cos_t)
 }
 
 /// Barycentrics `(b1, b2)` uniform over a triangle (area preserving square-root map).
@@ -407,6 +437,29 @@ impl Distribution2D {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The polynomial sine and cosine against f64's, over their whole interval and over the
+    /// turn (every quarter, both signs): absolute error below 1.2·10⁻⁷, two steps of f32 near 1
+    /// (measured: 5.7·10⁻⁸ and 8.8·10⁻⁸).
+    #[test]
+    fn polynomial_sine_and_cosine_match_f64() {
+        let n = 200_000;
+        let mut worst = 0.0f64;
+        for i in 0..=n {
+            let x = (-std::f64::consts::FRAC_PI_4 + std::f64::consts::FRAC_PI_2 * i as f64 / n as f64) as f32;
+            let (s, c) = sin_cos_octant(x);
+            worst = worst.max((s as f64 - (x as f64).sin()).abs()).max((c as f64 - (x as f64).cos()).abs());
+        }
+        assert!(worst < 1.2e-7, "octant: {worst:e}");
+        let mut worst = 0.0f64;
+        for i in 0..=n {
+            let u = i as f32 / n as f32;
+            let (c, s) = cos_sin_turn(u);
+            let a = std::f64::consts::TAU * u as f64;
+            worst = worst.max((s as f64 - a.sin()).abs()).max((c as f64 - a.cos()).abs());
+        }
+        assert!(worst < 1.2e-7, "turn: {worst:e}");
+    }
 
     #[test]
     fn sobol_points_of_a_pixel_form_a_net() {
