@@ -34,9 +34,15 @@ impl Pcg32 {
     }
 
     /// The stream for one camera sample: a function of the user's seed, the pixel and the sample.
+    /// One strong mix of the three (the seed's own mix is the same for every sample of a render)
+    /// gives both the state and the stream (increment): every camera sample pays for it, and
+    /// the four mixes and two steps this took before cost ~15 % of a sample that sees only the
+    /// sky.
+    #[inline]
     pub fn for_sample(seed: u64, pixel: u64, sample: u64) -> Pcg32 {
-        let h = mix64(seed ^ mix64(pixel.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ mix64(sample)));
-        Pcg32::new(h, mix64(h ^ 0xda3e_39cb_94b9_5bdb))
+        let key = mix64(seed) ^ pixel.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ sample.wrapping_mul(0xd1b5_4a32_d192_ed03);
+        let h = mix64(key);
+        Pcg32 { state: h, inc: ((h ^ 0xda3e_39cb_94b9_5bdb).rotate_left(29) << 1) | 1 }
     }
 
     #[inline]

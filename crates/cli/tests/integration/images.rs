@@ -561,7 +561,8 @@ fn image_textures_map_with_v_up() {
         (false, false) => image::Rgb([255, 255, 255]),
     });
     png.save(dir.path().join("t.png")).unwrap();
-    let src = "[render]\nspp = 1\n[camera]\ntype = \"orthographic\"\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\nscale = 1\n\
+    // A box filter keeps each sample inside its pixel, so inside its texel's neighbourhood.
+    let src = "[render]\nspp = 1\nfilter = \"box\"\n[camera]\ntype = \"orthographic\"\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\nscale = 1\n\
                [materials.m]\ntype = \"diffuse\"\nalbedo = { image = \"t.png\" }\n\
                [[shapes]]\ntype = \"quad\"\ncorner = [-1, -1, 0]\nedge1 = [2, 0, 0]\nedge2 = [0, 2, 0]\nmaterial = \"m\"\n\
                [[lights]]\ntype = \"directional\"\ndirection = [0, 0, -1]\nirradiance = 3.14159265\n";
