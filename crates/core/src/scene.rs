@@ -534,6 +534,12 @@ fn with_mesh_ray<R>(o: &Object, ray: &Ray, shared: &mut Option<Ray4>, f: impl Fn
 
 /// The boxes of `m`'s triangles, and their union, in one parallel pass (a second pass to
 /// unite them cost 3 ms of the dragon's build).
+/// The unit normal of triangle `t` of `m` by its winding (zero for a degenerate triangle).
+fn face_normal(m: &Mesh, t: [u32; 3]) -> Vec3 {
+    let [p0, p1, p2] = t.map(|i| m.positions[i as usize]);
+    (p1 - p0).cross(p2 - p0).normalize_or_zero()
+}
+
 fn triangle_boxes(m: &Mesh) -> (Vec<Aabb>, Aabb) {
     use rayon::prelude::*;
     const CHUNK: usize = 4096;
@@ -565,6 +571,10 @@ pub struct World<'s, A: Accel> {
     blas: Vec<Option<A>>,
     /// Per geometry, the triangles laid out for its bottom-level structure.
     tris: Vec<TriData>,
+    /// Per mesh, each triangle's unit geometric normal (its winding's; empty for spheres), as
+    /// [`World::interaction`] would compute it: worked out once, not at every hit, where its
+    /// square root and division sat on the path of every shading point.
+    face_normals: Vec<Vec<Vec3>>,
     /// Per object, `(geometry, first block, end)` where the object is an untransformed mesh
     /// tested as one range of blocks: the top level's leaf test goes straight to them.
     /// `NOT_DIRECT` in the first field otherwise.
@@ -616,6 +626,14 @@ impl<'s, A: Accel> World<'s, A> {
                 _ => TriData::Single(Vec::new()),
             })
             .collect();
+        let face_normals = scene
+            .geometries
+            .par_iter()
+            .map(|g| match g {
+                Geometry::Mesh(m) => m.indices.par_iter().map(|&t| face_normal(m, t)).collect(),
+                Geometry::Sphere(_) => Vec::new(),
+            })
+            .collect();
         let boxes: Vec<Aabb> = scene.objects.iter().map(|o| o.place_aabb(geometry_boxes[o.geometry])).collect();
         // One object per top-level leaf: each object's box is tested before its own structure
         // is entered (objects are few; a wasted bottom-level entry costs far more).
@@ -663,6 +681,7 @@ impl<'s, A: Accel> World<'s, A> {
             top,
             blas,
             tris,
+            face_normals,
             object_blocks,
             top_by_object,
             lights,
@@ -982,7 +1001,7 @@ impl<'s, A: Accel> World<'s, A> {
                 let (p0, p1, p2) = (m.positions[i0], m.positions[i1], m.positions[i2]);
                 // The hit point from barycentrics is far more accurate than o + t·d.
                 let p = p0 * b0 + p1 * b1 + p2 * b2;
-                let mut ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+                let mut ng = self.face_normals[o.geometry][prim as usize];
                 let ns = match &m.normals {
                     Some(n) => {
                         let ns = (n[i0] * b0 + n[i1] * b1 + n[i2] * b2).normalize_or_zero();
