@@ -241,7 +241,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
 }
 
 /// Traces the samples of pixel `(x, y)`, handing each one's film position and radiance to
-/// `sink`. Camera rays go sixteen at a time, as a packet ([`World::hit_packet16`]), which
+/// `sink`. Camera rays go eight at a time, as a packet ([`World::hit_packet8`]), which
 /// finds for each the hit it finds alone (but for exact ties between triangles, see
 /// [`World::hit_packet8`]), where the world traces packets together. A hit's
 /// [`Intersection`](crate::scene::Intersection) is made only when its sample is shaded.
@@ -258,29 +258,27 @@ fn render_pixel<A: Accel, I: Integrator>(
 ) {
     let pixel = y as u64 * s.width as u64 + x as u64;
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
-    for first in (0..s.spp).step_by(16) {
-        let n = (s.spp - first).min(16) as usize;
-        let mut samplers: [Option<Sampler>; 16] = std::array::from_fn(|_| None);
-        let (mut film, mut lens) = ([[Vec2::ZERO; 8]; 2], [[Vec2::ZERO; 8]; 2]);
+    for first in (0..s.spp).step_by(8) {
+        let n = (s.spp - first).min(8) as usize;
+        let mut samplers: [Option<Sampler>; 8] = std::array::from_fn(|_| None);
+        let (mut film, mut lens) = ([Vec2::ZERO; 8], [Vec2::ZERO; 8]);
         for k in 0..n {
             let (sampler, f, l) = camera_film(world, s, strata, x, y, pixel, key, first + k as u32);
-            (samplers[k], film[k / 8][k % 8], lens[k / 8][k % 8]) = (Some(sampler), f, l);
+            (samplers[k], film[k], lens[k]) = (Some(sampler), f, l);
         }
-        // Eight rays at once (`Camera::rays8`, the same rays as one at a time); lanes past
+        // The eight rays at once (`Camera::rays8`, the same rays as one at a time); lanes past
         // the pixel's last sample repeat its first and are not traced.
-        for k in n..16 {
-            (film[k / 8][k % 8], lens[k / 8][k % 8]) = (film[0][0], lens[0][0]);
+        for k in n..8 {
+            (film[k], lens[k]) = (film[0], lens[0]);
         }
-        let cam = &world.scene.camera;
-        let rays = [cam.rays8(&film[0], s.width, s.height, &lens[0]), cam.rays8(&film[1], s.width, s.height, &lens[1])];
-        let active = [(0xffffu32 >> (16 - n)) as u8, ((0xffffu32 >> (16 - n)) >> 8) as u8];
-        let hits = world.hit_packet16(&rays, active);
+        let rays = world.scene.camera.rays8(&film, s.width, s.height, &lens);
+        let hits = world.hit_packet8(&rays, (0xffu32 >> (8 - n)) as u8);
         for (k, slot) in samplers.iter_mut().enumerate() {
             let Some(sampler) = slot else { break };
             // The ray is read where it lies: a copy made here, just before it is read, would be
             // written in pieces and read whole (a store-forwarding stall).
-            let (film, ray) = (film[k / 8][k % 8], &rays[k / 8][k % 8]);
-            let hit = hits[k / 8][k % 8].map(|h| world.interaction(ray, &h));
+            let (film, ray) = (film[k], &rays[k]);
+            let hit = hits[k].map(|h| world.interaction(ray, &h));
             stats.camera += 1;
             let mut sample = Accum::default();
             if s.aovs {

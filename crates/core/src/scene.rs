@@ -534,33 +534,37 @@ fn with_mesh_ray<R>(o: &Object, ray: &Ray, shared: &mut Option<Ray4>, f: impl Fn
 
 /// The boxes of `m`'s triangles, and their union, in one parallel pass (a second pass to
 /// unite them cost 3 ms of the dragon's build).
-/// The unit normal of triangle `t` of `m` by its winding (zero for a degenerate triangle).
-fn face_normal(m: &Mesh, t: [u32; 3]) -> Vec3 {
-    let [p0, p1, p2] = t.map(|i| m.positions[i as usize]);
-    (p1 - p0).cross(p2 - p0).normalize_or_zero()
-}
-
-fn triangle_boxes(m: &Mesh) -> (Vec<Aabb>, Aabb) {
+/// Each triangle's box, their union, and each triangle's unit normal by its winding (zero for
+/// a degenerate triangle: [`World::interaction`] then falls back to the ray), in one parallel
+/// pass over the triangles.
+fn triangle_boxes(m: &Mesh) -> (Vec<Aabb>, Aabb, Vec<Vec3>) {
     use rayon::prelude::*;
     const CHUNK: usize = 4096;
     let n = m.indices.len();
     let mut boxes: Vec<Aabb> = Vec::with_capacity(n);
+    let mut normals: Vec<Vec3> = Vec::with_capacity(n);
     let bound = boxes.spare_capacity_mut()[..n]
         .par_chunks_mut(CHUNK)
+        .zip(normals.spare_capacity_mut()[..n].par_chunks_mut(CHUNK))
         .enumerate()
-        .map(|(c, chunk)| {
+        .map(|(c, (chunk, nchunk))| {
             let mut u = Aabb::EMPTY;
-            for (k, slot) in chunk.iter_mut().enumerate() {
-                let b = m.triangle_aabb(c * CHUNK + k);
+            for (k, (slot, nslot)) in chunk.iter_mut().zip(nchunk).enumerate() {
+                let [p0, p1, p2] = m.triangle(c * CHUNK + k);
+                let b = Aabb::from_points([p0, p1, p2]);
                 u = u.union(b);
                 slot.write(b);
+                nslot.write((p1 - p0).cross(p2 - p0).normalize_or_zero());
             }
             u
         })
         .reduce(|| Aabb::EMPTY, Aabb::union);
-    // SAFETY: the chunks cover the first `n` slots, and each slot was written above.
-    unsafe { boxes.set_len(n) };
-    (boxes, bound)
+    // SAFETY: the chunks cover the first `n` slots of both, and each slot was written above.
+    unsafe {
+        boxes.set_len(n);
+        normals.set_len(n);
+    }
+    (boxes, bound, normals)
 }
 
 /// A scene with its acceleration structures: one per mesh (bottom level) and one over the
@@ -603,20 +607,28 @@ impl<'s, A: Accel> World<'s, A> {
         // Each geometry's structure and box. A mesh's box is the union of its triangles' boxes
         // (the box of the vertices its triangles use, as `Mesh::aabb` computes it, without a
         // second pass over the indices).
-        let (mut blas, geometry_boxes): (Vec<Option<A>>, Vec<Aabb>) = scene
+        // The same pass keeps each triangle's unit normal for shading.
+        let built: Vec<(Option<A>, Aabb, Vec<Vec3>)> = scene
             .geometries
             .par_iter()
             .map(|g| match g {
                 Geometry::Mesh(m) => {
-                    let (boxes, bound) = triangle_boxes(m);
+                    let (boxes, bound, normals) = triangle_boxes(m);
                     let clip = |prim: u32, part: &Aabb, axis: usize, pos: f32| {
                         clip_triangle(m.triangle(prim as usize), part, axis, pos)
                     };
-                    (Some(A::build_clipped(&boxes, params, &clip)), bound)
+                    (Some(A::build_clipped(&boxes, params, &clip)), bound, normals)
                 }
-                Geometry::Sphere(s) => (None, s.aabb()),
+                Geometry::Sphere(s) => (None, s.aabb(), Vec::new()),
             })
-            .unzip();
+            .collect();
+        let mut blas = Vec::with_capacity(built.len());
+        let (mut geometry_boxes, mut face_normals) = (Vec::with_capacity(built.len()), Vec::with_capacity(built.len()));
+        for (accel, bound, normals) in built {
+            blas.push(accel);
+            geometry_boxes.push(bound);
+            face_normals.push(normals);
+        }
         let tris: Vec<TriData> = scene
             .geometries
             .iter()
@@ -624,14 +636,6 @@ impl<'s, A: Accel> World<'s, A> {
             .map(|(g, accel)| match (g, accel) {
                 (Geometry::Mesh(m), Some(accel)) => TriData::new(m, accel),
                 _ => TriData::Single(Vec::new()),
-            })
-            .collect();
-        let face_normals = scene
-            .geometries
-            .par_iter()
-            .map(|g| match g {
-                Geometry::Mesh(m) => m.indices.par_iter().map(|&t| face_normal(m, t)).collect(),
-                Geometry::Sphere(_) => Vec::new(),
             })
             .collect();
         let boxes: Vec<Aabb> = scene.objects.iter().map(|o| o.place_aabb(geometry_boxes[o.geometry])).collect();

@@ -1467,9 +1467,6 @@ mod packet {
         /// The ranges of the `active` rays, or None where there are none or a direction
         /// component changes sign across them or is zero in one (its inverse is infinite).
         #[target_feature(enable = "avx2")]
-        // Inlined: once the renderer's camera rays shared `closest16` with the bench's
-        // packets, this stopped being inlined there and the packets lost ~7 % (half of it back).
-        #[inline]
         fn new(r: &Rays8, active: u8) -> Option<Ranges> {
             let active = active as i32;
             if active == 0 {

@@ -87,10 +87,6 @@ impl Mesh {
         [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
     }
 
-    pub fn triangle_aabb(&self, i: usize) -> Aabb {
-        Aabb::from_points(self.triangle(i))
-    }
-
     pub fn aabb(&self) -> Aabb {
         // Only vertices that triangles use.
         self.indices.iter().flatten().fold(Aabb::EMPTY, |b, &i| b.grow(self.positions[i as usize]))
