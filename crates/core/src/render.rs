@@ -242,8 +242,8 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
 
 /// Traces the samples of pixel `(x, y)`, handing each one's film position and radiance to
 /// `sink`. Camera rays go eight at a time, as a packet ([`World::hit_packet8`]), which
-/// finds for each the hit it finds alone (but for exact ties between triangles, see
-/// [`World::hit_packet8`]), where the world traces packets together. A hit's
+/// finds for each the hit it finds alone (but for exact ties between triangles, see there),
+/// where the world traces packets together. A hit's
 /// [`Intersection`](crate::scene::Intersection) is made only when its sample is shaded.
 #[allow(clippy::too_many_arguments)]
 fn render_pixel<A: Accel, I: Integrator>(
