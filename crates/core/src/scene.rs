@@ -606,9 +606,9 @@ impl<'s, A: Accel> World<'s, A> {
         use rayon::prelude::*;
         // Each geometry's structure and box. A mesh's box is the union of its triangles' boxes
         // (the box of the vertices its triangles use, as `Mesh::aabb` computes it, without a
-        // second pass over the indices).
-        // The same pass keeps each triangle's unit normal for shading.
-        let built: Vec<(Option<A>, Aabb, Vec<Vec3>)> = scene
+        // second pass over the indices). The same pass keeps each triangle's unit normal for
+        // shading.
+        let (mut blas, (geometry_boxes, face_normals)): (Vec<_>, (Vec<_>, Vec<_>)) = scene
             .geometries
             .par_iter()
             .map(|g| match g {
@@ -617,18 +617,11 @@ impl<'s, A: Accel> World<'s, A> {
                     let clip = |prim: u32, part: &Aabb, axis: usize, pos: f32| {
                         clip_triangle(m.triangle(prim as usize), part, axis, pos)
                     };
-                    (Some(A::build_clipped(&boxes, params, &clip)), bound, normals)
+                    (Some(A::build_clipped(&boxes, params, &clip)), (bound, normals))
                 }
-                Geometry::Sphere(s) => (None, s.aabb(), Vec::new()),
+                Geometry::Sphere(s) => (None, (s.aabb(), Vec::new())),
             })
-            .collect();
-        let mut blas = Vec::with_capacity(built.len());
-        let (mut geometry_boxes, mut face_normals) = (Vec::with_capacity(built.len()), Vec::with_capacity(built.len()));
-        for (accel, bound, normals) in built {
-            blas.push(accel);
-            geometry_boxes.push(bound);
-            face_normals.push(normals);
-        }
+            .unzip();
         let tris: Vec<TriData> = scene
             .geometries
             .iter()

@@ -1691,32 +1691,41 @@ mod packet {
         test: &mut impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
     ) -> [u8; 2] {
         let mut hits = [0u8; 2];
-        if !bvh.root_leaf && !bvh.nodes.is_empty() {
-            let r = [load(&rays[0]), load(&rays[1])];
-            if misses_tree(bvh, &r[0], active[0]) && misses_tree(bvh, &r[1], active[1]) {
-                return hits;
-            }
-            let frustum = match (Ranges::new(&r[0], active[0]), Ranges::new(&r[1], active[1])) {
-                (Some(a), Some(b)) => a.union(b).and_then(|g| Frustum::of(g)),
-                _ => None,
-            };
-            if let Some(f) = frustum {
-                let mut leaf = |leaf: u32, mask: u32, t_max: &mut [[f32; 8]; 2]| {
-                    for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
-                        let lanes = (mask >> (8 * g)) as u8;
-                        if lanes != 0 {
-                            *h |= test(g, leaf, lanes, t);
-                        }
-                    }
-                };
+        if bvh.root_leaf || bvh.nodes.is_empty() {
+            for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
                 // SAFETY: the caller guarantees AVX2.
-                unsafe { frustum_walk(bvh, &r, &f, active, t_max, &mut leaf) };
-                return hits;
+                *h = unsafe { closest8(bvh, &rays[g], active[g], t, &mut |leaf, lanes, t| test(g, leaf, lanes, t)) };
             }
+            return hits;
         }
-        for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
+        let r = [load(&rays[0]), load(&rays[1])];
+        let miss = [misses_tree(bvh, &r[0], active[0]), misses_tree(bvh, &r[1], active[1])];
+        if miss[0] && miss[1] {
+            return hits;
+        }
+        let frustum = match (Ranges::new(&r[0], active[0]), Ranges::new(&r[1], active[1])) {
+            (Some(a), Some(b)) => a.union(b).and_then(|g| Frustum::of(g)),
+            _ => None,
+        };
+        if let Some(f) = frustum {
+            let mut leaf = |leaf: u32, mask: u32, t_max: &mut [[f32; 8]; 2]| {
+                for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
+                    let lanes = (mask >> (8 * g)) as u8;
+                    if lanes != 0 {
+                        *h |= test(g, leaf, lanes, t);
+                    }
+                }
+            };
             // SAFETY: the caller guarantees AVX2.
-            *h = unsafe { closest8(bvh, &rays[g], active[g], t, &mut |leaf, lanes, t| test(g, leaf, lanes, t)) };
+            unsafe { frustum_walk(bvh, &r, &f, active, t_max, &mut leaf) };
+            return hits;
+        }
+        // Each group as `closest8` traces it, with its rays loaded and its box test made above.
+        for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
+            if !miss[g] {
+                // SAFETY: the caller guarantees AVX2.
+                *h = unsafe { walk8(bvh, &r[g], active[g], t, &mut |leaf, lanes, t| test(g, leaf, lanes, t)) };
+            }
         }
         hits
     }
@@ -1731,7 +1740,6 @@ mod packet {
         t_max: &mut [f32; 8],
         test: &mut impl FnMut(u32, u8, &mut [f32; 8]) -> u8,
     ) -> u8 {
-        let mut hits = 0u8;
         if bvh.root_leaf {
             return test(bvh.root_ref & !LEAF, active, t_max);
         }
@@ -1742,13 +1750,29 @@ mod packet {
         if misses_tree(bvh, &r, active) {
             return 0;
         }
-        if let Some(f) = Frustum::new(&r, active) {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { walk8(bvh, &r, active, t_max, test) }
+    }
+
+    /// [`closest8`]'s traversal of a tree of nodes, for rays already loaded (`r`) of which
+    /// some `active` one meets the tree's box.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[target_feature(enable = "avx2")]
+    unsafe fn walk8(
+        bvh: &Bvh,
+        r: &Rays8,
+        active: u8,
+        t_max: &mut [f32; 8],
+        test: &mut impl FnMut(u32, u8, &mut [f32; 8]) -> u8,
+    ) -> u8 {
+        let mut hits = 0u8;
+        if let Some(f) = Frustum::new(r, active) {
             let mut leaf =
                 |leaf: u32, mask: u32, t_max: &mut [[f32; 8]; 1]| hits |= test(leaf, mask as u8, &mut t_max[0]);
             // SAFETY: the caller guarantees AVX2.
-            unsafe {
-                frustum_walk(bvh, std::array::from_ref(&r), &f, [active], std::array::from_mut(t_max), &mut leaf)
-            };
+            unsafe { frustum_walk(bvh, std::array::from_ref(r), &f, [active], std::array::from_mut(t_max), &mut leaf) };
             return hits;
         }
         // Uninitialised, as in the single-ray traversal: only entries below `sp` are read.
@@ -1774,7 +1798,7 @@ mod packet {
                 if c == EMPTY {
                     continue;
                 }
-                let (tn, hit) = slab8(&n.bounds, j, &r, tm);
+                let (tn, hit) = slab8(&n.bounds, j, r, tm);
                 let m = hit & mask;
                 if m == 0 {
                     continue;
