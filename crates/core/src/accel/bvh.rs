@@ -1408,30 +1408,45 @@ mod packet {
         _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u8 & active == 0
     }
 
-    /// A node's children that a packet enters, `(reference, lanes, entry distance)`, kept in
-    /// order of decreasing distance (the nearest is pushed last and popped first).
-    #[derive(Default)]
-    struct Kids {
-        kids: [(u32, u32, f32); WIDTH],
-        len: usize,
+    /// A child a packet enters: its reference and lanes in one word (low and high half), so
+    /// that the pair is written and read back whole (two 4-byte writes read as one 8-byte
+    /// word would stall the read on store forwarding), and its entry distance.
+    #[derive(Clone, Copy)]
+    struct Kid {
+        refs: u64,
+        t: f32,
     }
 
-    impl Kids {
-        /// Inserts a child; among equal distances the later one counts as nearer.
+    impl Kid {
         #[inline(always)]
-        fn insert(&mut self, kid: (u32, u32, f32)) {
-            let mut p = self.len;
-            while p > 0 && self.kids[p - 1].2 < kid.2 {
-                self.kids[p] = self.kids[p - 1];
-                p -= 1;
-            }
-            self.kids[p] = kid;
-            self.len += 1;
+        fn new(node: u32, lanes: u32, t: f32) -> Kid {
+            Kid { refs: node as u64 | (lanes as u64) << 32, t }
         }
 
-        fn far_to_near(&self) -> &[(u32, u32, f32)] {
-            &self.kids[..self.len]
+        #[inline(always)]
+        fn node(self) -> u32 {
+            self.refs as u32
         }
+
+        #[inline(always)]
+        fn lanes(self) -> u32 {
+            (self.refs >> 32) as u32
+        }
+    }
+
+    /// Pushes a child onto the stack, whose entries from `base` up to `*sp` (the node's
+    /// children pushed so far) are kept in order of decreasing entry distance, so that the
+    /// nearest is popped first; among equal distances the later one counts as nearer.
+    #[inline(always)]
+    fn push_sorted(stack: &mut [std::mem::MaybeUninit<Kid>], base: usize, sp: &mut usize, kid: Kid) {
+        let mut p = *sp;
+        // SAFETY: entries base..sp were written by this function.
+        while p > base && unsafe { stack[p - 1].assume_init() }.t < kid.t {
+            stack[p] = stack[p - 1];
+            p -= 1;
+        }
+        stack[p].write(kid);
+        *sp += 1;
     }
 
     /// A packet as one frustum: per axis, the range of the rays' origins and of their inverse
@@ -1626,15 +1641,16 @@ mod packet {
             |t_max: &[[f32; 8]; P]| (0..P).map(|g| farthest(&t_max[g], active[g])).fold(f32::NEG_INFINITY, f32::max);
         let all = (0..P).fold(0u32, |m, g| m | (active[g] as u32) << (8 * g));
         let mut far = farthest_all(t_max);
-        // (reference, lanes, entry distance); only entries below `sp` are read.
-        let mut stack = [std::mem::MaybeUninit::<(u32, u32, f32)>::uninit(); (WIDTH - 1) * MAX_STACK];
-        stack[0].write((0, all, 0.0));
+        // Only entries below `sp` are read.
+        let mut stack = [std::mem::MaybeUninit::<Kid>::uninit(); (WIDTH - 1) * MAX_STACK];
+        stack[0].write(Kid::new(0, all, 0.0));
         let mut sp = 1usize;
         while sp > 0 {
             sp -= 1;
             // SAFETY: stack[sp] was written before sp was raised past it.
-            let (cur, mask, d) = unsafe { stack[sp].assume_init() };
-            if d > far {
+            let kid = unsafe { stack[sp].assume_init() };
+            let (cur, mask) = (kid.node(), kid.lanes());
+            if kid.t > far {
                 continue;
             }
             if cur & LEAF != 0 {
@@ -1653,7 +1669,7 @@ mod packet {
             // SAFETY: unaligned loads of each group's eight t_max.
             let tm: [__m256; P] = std::array::from_fn(|g| unsafe { _mm256_loadu_ps(t_max[g].as_ptr()) });
             // Children ordered far to near, so that the nearest is popped first.
-            let mut kids = Kids::default();
+            let base = sp;
             for j in crate::accel::lanes(hit) {
                 let c = n.child[j];
                 if c == EMPTY {
@@ -1665,12 +1681,8 @@ mod packet {
                     all
                 };
                 if lanes != 0 {
-                    kids.insert((c, lanes, t[j]));
+                    push_sorted(&mut stack, base, &mut sp, Kid::new(c, lanes, t[j]));
                 }
-            }
-            for &kid in kids.far_to_near() {
-                stack[sp].write(kid);
-                sp += 1;
             }
         }
     }
@@ -1776,13 +1788,14 @@ mod packet {
             return hits;
         }
         // Uninitialised, as in the single-ray traversal: only entries below `sp` are read.
-        let mut stack = [std::mem::MaybeUninit::<(u32, u32)>::uninit(); (WIDTH - 1) * MAX_STACK];
-        stack[0].write((0, active as u32));
+        let mut stack = [std::mem::MaybeUninit::<Kid>::uninit(); (WIDTH - 1) * MAX_STACK];
+        stack[0].write(Kid::new(0, active as u32, 0.0));
         let mut sp = 1usize;
         while sp > 0 {
             sp -= 1;
             // SAFETY: stack[sp] was written before sp was raised past it.
-            let (cur, mask) = unsafe { stack[sp].assume_init() };
+            let kid = unsafe { stack[sp].assume_init() };
+            let (cur, mask) = (kid.node(), kid.lanes());
             if cur & LEAF != 0 {
                 hits |= test(cur & !LEAF, mask as u8, t_max);
                 continue;
@@ -1792,7 +1805,7 @@ mod packet {
             let tm = unsafe { _mm256_loadu_ps(t_max.as_ptr()) };
             // Children hit by any lane still active, ordered far to near by the entry distance
             // of their first lane, so that the nearest is popped first.
-            let mut kids = Kids::default();
+            let base = sp;
             for j in 0..WIDTH {
                 let c = n.child[j];
                 if c == EMPTY {
@@ -1806,11 +1819,7 @@ mod packet {
                 let mut t = [0.0f32; 8];
                 // SAFETY: an unaligned store into a local array of eight floats.
                 unsafe { _mm256_storeu_ps(t.as_mut_ptr(), tn) };
-                kids.insert((c, m, t[m.trailing_zeros() as usize]));
-            }
-            for &(c, m, _) in kids.far_to_near() {
-                stack[sp].write((c, m));
-                sp += 1;
+                push_sorted(&mut stack, base, &mut sp, Kid::new(c, m, t[m.trailing_zeros() as usize]));
             }
         }
         hits
