@@ -101,7 +101,9 @@ fn count_closest_packets<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
             let mut n = 0;
             for p in packets.by_ref() {
                 let groups: [[Ray; 8]; 2] = std::array::from_fn(|g| std::array::from_fn(|i| p[8 * g + i]));
-                n += w.hit_packet16(&groups, [0xff; 2]).iter().flatten().filter(|h| h.is_some()).count();
+                let mut hits = [[None; 8]; 2];
+                w.hit_packets(&groups, [0xff; 2], &mut hits);
+                n += hits.iter().flatten().filter(|h| h.is_some()).count();
             }
             n + packets.remainder().iter().filter(|r| w.hit(r, f32::INFINITY).is_some()).count()
         })

@@ -106,13 +106,20 @@ impl Camera {
     /// for bit. A perspective camera computes them in SSE lanes (its divisions and square
     /// roots, one per ray, are what a camera ray costs); the other projections call `ray`
     /// eight times.
-    pub fn rays8(&self, film: &[Vec2; 8], width: u32, height: u32, lens: &[Vec2; 8]) -> [Ray; 8] {
+    ///
+    /// The rays are written into `out` (a returned array was copied again by the caller).
+    pub fn rays8(&self, film: &[Vec2; 8], width: u32, height: u32, lens: &[Vec2; 8], out: &mut [Ray; 8]) {
         let Projection::Perspective { .. } = self.projection else {
-            return std::array::from_fn(|i| self.ray(film[i], width, height, lens[i]));
+            for (i, out) in out.iter_mut().enumerate() {
+                *out = self.ray(film[i], width, height, lens[i]);
+            }
+            return;
         };
         #[cfg(not(target_arch = "x86_64"))]
         {
-            std::array::from_fn(|i| self.ray(film[i], width, height, lens[i]))
+            for (i, out) in out.iter_mut().enumerate() {
+                *out = self.ray(film[i], width, height, lens[i]);
+            }
         }
         #[cfg(target_arch = "x86_64")]
         {
@@ -146,7 +153,9 @@ impl Camera {
                     _mm_storeu_ps(d[2][half..].as_mut_ptr(), _mm_mul_ps(dz, inv));
                 }
             }
-            std::array::from_fn(|i| Ray::new(self.eye, Vec3::new(d[0][i], d[1][i], d[2][i])))
+            for (i, out) in out.iter_mut().enumerate() {
+                *out = Ray::new(self.eye, Vec3::new(d[0][i], d[1][i], d[2][i]));
+            }
         }
     }
 }
@@ -191,7 +200,8 @@ mod tests {
                 let film: [Vec2; 8] =
                     std::array::from_fn(|_| Vec2::new(rng.next_f32() * 640.0, rng.next_f32() * 480.0));
                 let lens: [Vec2; 8] = std::array::from_fn(|_| rng.next_2d());
-                let rays = c.rays8(&film, 640, 480, &lens);
+                let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
+                c.rays8(&film, 640, 480, &lens, &mut rays);
                 for i in 0..8 {
                     let want = c.ray(film[i], 640, 480, lens[i]);
                     assert_eq!(rays[i].o.to_array().map(f32::to_bits), want.o.to_array().map(f32::to_bits));

@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use crate::accel::Accel;
 use crate::filter::Filter;
+use crate::geometry::Ray;
 use crate::image::Image;
 use crate::integrator::{Integrator, RayStats};
 use crate::sampling::{Sampler, SamplerKind, Strata};
@@ -240,10 +241,14 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
     (image, aovs, stats)
 }
 
+/// Samples of a pixel whose camera rays are traced together: packets of eight, `CHUNK / 8`
+/// of them under one frustum.
+const CHUNK: usize = 32;
+
 /// Traces the samples of pixel `(x, y)`, handing each one's film position and radiance to
-/// `sink`. Camera rays go eight at a time, as a packet ([`World::hit_packet8`]), which
-/// finds for each the hit it finds alone (but for exact ties between triangles, see there),
-/// where the world traces packets together. A hit's
+/// `sink`. Camera rays go `CHUNK` at a time, in packets of eight traced together
+/// ([`World::hit_packets`]), which find for each ray the hit it finds alone (but for exact
+/// ties between triangles, see [`World::hit_packet8`]). A hit's
 /// [`Intersection`](crate::scene::Intersection) is made only when its sample is shaded.
 #[allow(clippy::too_many_arguments)]
 fn render_pixel<A: Accel, I: Integrator>(
@@ -256,29 +261,36 @@ fn render_pixel<A: Accel, I: Integrator>(
     stats: &mut RayStats,
     sink: &mut impl FnMut(Vec2, Accum),
 ) {
+    const GROUPS: usize = CHUNK / 8;
     let pixel = y as u64 * s.width as u64 + x as u64;
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
-    for first in (0..s.spp).step_by(8) {
-        let n = (s.spp - first).min(8) as usize;
-        let mut samplers: [Option<Sampler>; 8] = std::array::from_fn(|_| None);
-        let (mut film, mut lens) = ([Vec2::ZERO; 8], [Vec2::ZERO; 8]);
+    let mut rays = [[Ray::new(Vec3::ZERO, Vec3::Z); 8]; GROUPS];
+    let mut hits = [[None; 8]; GROUPS];
+    for first in (0..s.spp).step_by(CHUNK) {
+        let n = (s.spp - first).min(CHUNK as u32) as usize;
+        let mut samplers: [Option<Sampler>; CHUNK] = std::array::from_fn(|_| None);
+        // Film and lens samples by packet of eight.
+        let (mut film, mut lens) = ([[Vec2::ZERO; 8]; GROUPS], [[Vec2::ZERO; 8]; GROUPS]);
         for k in 0..n {
             let (sampler, f, l) = camera_film(world, s, strata, x, y, pixel, key, first + k as u32);
-            (samplers[k], film[k], lens[k]) = (Some(sampler), f, l);
+            (samplers[k], film[k / 8][k % 8], lens[k / 8][k % 8]) = (Some(sampler), f, l);
         }
-        // The eight rays at once (`Camera::rays8`, the same rays as one at a time); lanes past
+        // Eight rays at once (`Camera::rays8`, the same rays as one at a time); lanes past
         // the pixel's last sample repeat its first and are not traced.
-        for k in n..8 {
-            (film[k], lens[k]) = (film[0], lens[0]);
+        for k in n..n.next_multiple_of(8) {
+            (film[k / 8][k % 8], lens[k / 8][k % 8]) = (film[0][0], lens[0][0]);
         }
-        let rays = world.scene.camera.rays8(&film, s.width, s.height, &lens);
-        let hits = world.hit_packet8(&rays, (0xffu32 >> (8 - n)) as u8);
+        for (g, rays) in rays.iter_mut().enumerate().take(n.div_ceil(8)) {
+            world.scene.camera.rays8(&film[g], s.width, s.height, &lens[g], rays);
+        }
+        let active: [u8; GROUPS] = std::array::from_fn(|g| (0xffu32 >> (8 - n.saturating_sub(8 * g).min(8))) as u8);
+        world.hit_packets(&rays, active, &mut hits);
         for (k, slot) in samplers.iter_mut().enumerate() {
             let Some(sampler) = slot else { break };
             // The ray is read where it lies: a copy made here, just before it is read, would be
             // written in pieces and read whole (a store-forwarding stall).
-            let (film, ray) = (film[k], &rays[k]);
-            let hit = hits[k].map(|h| world.interaction(ray, &h));
+            let (film, ray) = (film[k / 8][k % 8], &rays[k / 8][k % 8]);
+            let hit = hits[k / 8][k % 8].as_ref().map(|h| world.interaction(ray, h));
             stats.camera += 1;
             let mut sample = Accum::default();
             if s.aovs {

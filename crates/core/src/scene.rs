@@ -917,30 +917,38 @@ impl<'s, A: Accel> World<'s, A> {
         std::array::from_fn(|i| rec[i].map(|(prim, h)| RawHit { t: t[i], object: objs[i], prim, b1: h.b1, b2: h.b2 }))
     }
 
-    /// [`World::hit_packet8`] for sixteen rays in two groups of eight (a 4×4 pixel tile: group
-    /// 0 its top two rows), with `active` lanes per group. A single mesh's tree is traversed
-    /// by all sixteen together ([`Accel::closest_leaf_packet16`]), each interior node tested
-    /// once for all of them; other scenes trace the groups as [`World::hit_packet8`] does.
-    pub fn hit_packet16(&self, rays: &[[Ray; 8]; 2], active: [u8; 2]) -> [[Option<RawHit>; 8]; 2] {
-        let tree = self.packet_tree().filter(|_| self.packets && active[0] != 0 && active[1] != 0);
+    /// [`World::hit_packet8`] for `P` groups of eight rays (at most 4: a 4×4 pixel tile as two
+    /// groups, group 0 its top two rows, or one pixel's camera samples), with `active` lanes per
+    /// group, the hits written into `out` (None where a lane is not active or misses). A single
+    /// mesh's tree is traversed by all the groups together ([`Accel::closest_leaf_packets`]),
+    /// each interior node tested once for all of them; other scenes trace the groups as
+    /// [`World::hit_packet8`] does.
+    pub fn hit_packets<const P: usize>(
+        &self,
+        rays: &[[Ray; 8]; P],
+        active: [u8; P],
+        out: &mut [[Option<RawHit>; 8]; P],
+    ) {
+        let tree = self.packet_tree().filter(|_| self.packets);
         let Some((accel, blocks, ranges, labelled)) = tree else {
-            let idle = [None; 8];
-            let group = |g: usize| if active[g] != 0 { self.hit_packet8(&rays[g], active[g]) } else { idle };
-            return [group(0), group(1)];
+            for (g, out) in out.iter_mut().enumerate() {
+                *out = if active[g] != 0 { self.hit_packet8(&rays[g], active[g]) } else { [None; 8] };
+            }
+            return;
         };
-        let mut packet = [PacketRays::default(), PacketRays::default()];
-        let mut t = [[f32::INFINITY; 8]; 2];
-        let mut rec: [[Option<(u32, TriHit)>; 8]; 2] = [[None; 8]; 2];
-        accel.closest_leaf_packet16(rays, active, &mut t, |g, leaf, lanes, tm| {
+        let mut packet: [PacketRays; P] = std::array::from_fn(|_| PacketRays::default());
+        let mut t = [[f32::INFINITY; 8]; P];
+        let mut rec: [[Option<(u32, TriHit)>; 8]; P] = [[None; 8]; P];
+        accel.closest_leaf_packets(rays, active, &mut t, |g, leaf, lanes, tm| {
             let blocks = TriData::leaf_blocks(blocks, ranges, labelled, leaf);
             packet[g].closest_in_blocks(&rays[g], active[g], self.avx2, blocks, lanes, tm, &mut rec[g])
         });
         // The packet tree is the one object's.
-        std::array::from_fn(|g| {
-            std::array::from_fn(|i| {
-                rec[g][i].map(|(prim, h)| RawHit { t: t[g][i], object: 0, prim, b1: h.b1, b2: h.b2 })
-            })
-        })
+        for ((out, rec), t) in out.iter_mut().zip(&rec).zip(&t) {
+            *out = std::array::from_fn(|i| {
+                rec[i].map(|(prim, h)| RawHit { t: t[i], object: 0, prim, b1: h.b1, b2: h.b2 })
+            });
+        }
     }
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).

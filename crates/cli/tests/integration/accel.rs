@@ -400,7 +400,39 @@ fn same_or_tie(scene: &Scene, r: &Ray, want: Option<RawHit>, got: Option<RawHit>
     }
 }
 
-/// Packets of eight and of sixteen rays (coherent camera rays, perspective and orthographic,
+/// [`World::hit_packets`] on `P` groups of eight consecutive rays of `rays`: every fourth packet
+/// with some lanes of each group only, every seventh with its last group idle, every fifth
+/// with its first group idle; each active lane gets the hit the ray gets alone (or a tie).
+fn check_groups<A: Accel, const P: usize>(w: &World<A>, scene: &Scene, rays: &[Ray], name: &str) {
+    for (k, p) in rays.chunks_exact(8 * P).enumerate() {
+        let groups: [[Ray; 8]; P] = std::array::from_fn(|g| std::array::from_fn(|i| p[8 * g + i]));
+        let mut active: [u8; P] =
+            std::array::from_fn(|g| if k % 4 == 3 { ((k * 37 + g * 54) % 255 + 1) as u8 } else { 0xff });
+        if k % 7 == 6 {
+            active[P - 1] = 0;
+        }
+        if k % 5 == 4 {
+            active[0] = 0;
+        }
+        let mut got = [[None; 8]; P];
+        w.hit_packets(&groups, active, &mut got);
+        for (g, (rays, got)) in groups.iter().zip(got).enumerate() {
+            for (lane, (r, h)) in rays.iter().zip(got).enumerate() {
+                if active[g] & (1 << lane) == 0 {
+                    assert!(h.is_none(), "{name}: {P} groups, lane {g}.{lane} is not active");
+                    continue;
+                }
+                let want = w.hit(r, f32::INFINITY);
+                assert!(
+                    same_or_tie(scene, r, want, h),
+                    "{name}: {P} groups, packet {k}, lane {g}.{lane}: {want:?} alone, {h:?}"
+                );
+            }
+        }
+    }
+}
+
+/// Packets of eight, sixteen and thirty-two rays (coherent camera rays, perspective and orthographic,
 /// and incoherent random ones) get the hits that each ray gets alone (or an exact tie, see
 /// [`same_or_tie`]), for every accelerator (the BVHs' AVX2 packet traversal where the
 /// CPU has it, one by one elsewhere), on a single mesh (where packets are used) and on the
@@ -496,29 +528,9 @@ fn ray_packets_hit_what_single_rays_hit() {
                         checked += 1;
                     }
                 }
-                // Sixteen at once, as two groups of eight: every fourth packet with some lanes
-                // only, every seventh with its second group idle.
-                for (k, p) in all.chunks_exact(16).enumerate() {
-                    let groups: [[Ray; 8]; 2] = std::array::from_fn(|g| std::array::from_fn(|i| p[8 * g + i]));
-                    let mut active = if k % 4 == 3 { [(k * 37 % 255 + 1) as u8, (k * 91 % 255 + 1) as u8] } else { [0xff; 2] };
-                    if k % 7 == 6 {
-                        active[1] = 0;
-                    }
-                    let got = w.hit_packet16(&groups, active);
-                    for (g, (rays, got)) in groups.iter().zip(got).enumerate() {
-                        for (lane, (r, h)) in rays.iter().zip(got).enumerate() {
-                            if active[g] & (1 << lane) == 0 {
-                                assert!(h.is_none(), "{name} {kind:?}: lane {g}.{lane} is not active");
-                                continue;
-                            }
-                            let want = w.hit(r, f32::INFINITY);
-                            assert!(
-                                same_or_tie(&scene, r, want, h),
-                                "{name} {kind:?}: sixteen-ray packet {k}, lane {g}.{lane}: {want:?} alone, {h:?}"
-                            );
-                        }
-                    }
-                }
+                // Sixteen and thirty-two at once, as groups of eight under one frustum.
+                check_groups::<_, 2>(w, &scene, &all, &format!("{name} {kind:?}"));
+                check_groups::<_, 4>(w, &scene, &all, &format!("{name} {kind:?}"));
                 (hits, checked)
             });
             assert!(hits > checked / 3, "{name} {kind:?}: {hits} of {checked}");

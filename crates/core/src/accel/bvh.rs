@@ -1349,6 +1349,12 @@ mod packet {
         neg: [__m256; 3],
     }
 
+    impl Rays8 {
+        /// The rays of a group with no active lane: never tested.
+        // SAFETY: an all-zero __m256 is a valid value (eight zero floats).
+        const IDLE: Rays8 = unsafe { std::mem::zeroed() };
+    }
+
     #[target_feature(enable = "avx2")]
     fn load(rays: &[Ray; 8]) -> Rays8 {
         let lane = |f: &dyn Fn(&Ray) -> f32| {
@@ -1481,8 +1487,15 @@ mod packet {
     impl Ranges {
         /// The ranges of the `active` rays, or None where there are none or a direction
         /// component changes sign across them or is zero in one (its inverse is infinite).
-        #[target_feature(enable = "avx2")]
-        fn new(r: &Rays8, active: u8) -> Option<Ranges> {
+        ///
+        /// Always inlined into its callers, which are compiled for AVX2 (an out-of-line call
+        /// cost the bench's packets 4 %); it carries no target feature of its own, which
+        /// `#[inline(always)]` does not allow.
+        ///
+        /// # Safety
+        /// The CPU must support AVX2.
+        #[inline(always)]
+        unsafe fn new(r: &Rays8, active: u8) -> Option<Ranges> {
             let active = active as i32;
             if active == 0 {
                 return None;
@@ -1528,7 +1541,8 @@ mod packet {
         /// rays share neither their origin nor their direction.
         #[target_feature(enable = "avx2")]
         fn new(r: &Rays8, active: u8) -> Option<Frustum> {
-            Frustum::of(Ranges::new(r, active)?)
+            // SAFETY: this function is compiled for AVX2, which its callers guarantee.
+            Frustum::of(unsafe { Ranges::new(r, active) }?)
         }
 
         /// The frustum of rays with ranges `g`, or None where the rays share neither their
@@ -1687,22 +1701,23 @@ mod packet {
         }
     }
 
-    /// [`closest8`] for sixteen rays, two groups of eight under one frustum (each interior
-    /// node is tested once for all sixteen); `test(group, leaf, lanes, t_max)` tests a group's
-    /// rays. Where the sixteen make no frustum, each group is traced as [`closest8`] traces it.
-    /// Returns each group's mask of lanes that hit.
+    /// [`closest8`] for `P` groups of eight rays under one frustum (each interior node is
+    /// tested once for all of them); `test(group, leaf, lanes, t_max)` tests a group's rays.
+    /// Where the groups make no frustum, each is traced as [`closest8`] traces it. Returns
+    /// each group's mask of lanes that hit. `P` is at most 4 (lane masks of 32 bits).
     ///
     /// # Safety
     /// The CPU must support AVX2.
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn closest16(
+    pub(super) unsafe fn closest_groups<const P: usize>(
         bvh: &Bvh,
-        rays: &[[Ray; 8]; 2],
-        active: [u8; 2],
-        t_max: &mut [[f32; 8]; 2],
+        rays: &[[Ray; 8]; P],
+        active: [u8; P],
+        t_max: &mut [[f32; 8]; P],
         test: &mut impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
-    ) -> [u8; 2] {
-        let mut hits = [0u8; 2];
+    ) -> [u8; P] {
+        const { assert!(P <= 4, "lane masks hold four groups of eight") };
+        let mut hits = [0u8; P];
         if bvh.root_leaf || bvh.nodes.is_empty() {
             for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
                 // SAFETY: the caller guarantees AVX2.
@@ -1710,17 +1725,31 @@ mod packet {
             }
             return hits;
         }
-        let r = [load(&rays[0]), load(&rays[1])];
-        let miss = [misses_tree(bvh, &r[0], active[0]), misses_tree(bvh, &r[1], active[1])];
-        if miss[0] && miss[1] {
+        // Idle groups (no active lane) are neither loaded nor tested.
+        let r: [Rays8; P] = std::array::from_fn(|g| if active[g] != 0 { load(&rays[g]) } else { Rays8::IDLE });
+        // Groups none of whose rays meet the tree's box take no further part.
+        let live: [u8; P] = std::array::from_fn(|g| if misses_tree(bvh, &r[g], active[g]) { 0 } else { active[g] });
+        if live.iter().all(|&a| a == 0) {
             return hits;
         }
-        let frustum = match (Ranges::new(&r[0], active[0]), Ranges::new(&r[1], active[1])) {
-            (Some(a), Some(b)) => a.union(b).and_then(|g| Frustum::of(g)),
-            _ => None,
-        };
-        if let Some(f) = frustum {
-            let mut leaf = |leaf: u32, mask: u32, t_max: &mut [[f32; 8]; 2]| {
+        // One frustum for the groups that go on, where each makes one and their signs agree.
+        // SAFETY: the caller guarantees AVX2.
+        let each: [Option<Ranges>; P] = std::array::from_fn(|g| unsafe { Ranges::new(&r[g], live[g]) });
+        let mut ranges = None;
+        let mut frustum = true;
+        for (g, m) in each.into_iter().enumerate() {
+            if live[g] == 0 {
+                continue;
+            }
+            ranges = match (m, ranges) {
+                (Some(m), None) => Some(m),
+                (Some(m), Some(all)) => m.union(all),
+                (None, _) => None,
+            };
+            frustum &= ranges.is_some();
+        }
+        if let Some(f) = ranges.filter(|_| frustum).and_then(|g| Frustum::of(g)) {
+            let mut leaf = |leaf: u32, mask: u32, t_max: &mut [[f32; 8]; P]| {
                 for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
                     let lanes = (mask >> (8 * g)) as u8;
                     if lanes != 0 {
@@ -1729,14 +1758,14 @@ mod packet {
                 }
             };
             // SAFETY: the caller guarantees AVX2.
-            unsafe { frustum_walk(bvh, &r, &f, active, t_max, &mut leaf) };
+            unsafe { frustum_walk(bvh, &r, &f, live, t_max, &mut leaf) };
             return hits;
         }
         // Each group as `closest8` traces it, with its rays loaded and its box test made above.
         for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
-            if !miss[g] {
+            if live[g] != 0 {
                 // SAFETY: the caller guarantees AVX2.
-                *h = unsafe { walk8(bvh, &r[g], active[g], t, &mut |leaf, lanes, t| test(g, leaf, lanes, t)) };
+                *h = unsafe { walk8(bvh, &r[g], live[g], t, &mut |leaf, lanes, t| test(g, leaf, lanes, t)) };
             }
         }
         hits
@@ -1922,17 +1951,17 @@ impl Accel for Bvh {
         super::lane_by_lane(self, rays, active, t_max, test)
     }
 
-    fn closest_leaf_packet16(
+    fn closest_leaf_packets<const P: usize>(
         &self,
-        rays: &[[Ray; 8]; 2],
-        active: [u8; 2],
-        t_max: &mut [[f32; 8]; 2],
+        rays: &[[Ray; 8]; P],
+        active: [u8; P],
+        t_max: &mut [[f32; 8]; P],
         mut test: impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
-    ) -> [u8; 2] {
+    ) -> [u8; P] {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
             // SAFETY: `avx` is set only where AVX2 was detected.
-            return unsafe { packet::closest16(self, rays, active, t_max, &mut test) };
+            return unsafe { packet::closest_groups(self, rays, active, t_max, &mut test) };
         }
         super::groups_one_by_one(self, rays, active, t_max, test)
     }

@@ -131,17 +131,18 @@ pub trait Accel: Send + Sync + Sized {
         lane_by_lane(self, rays, active, t_max, test)
     }
 
-    /// [`Accel::closest_leaf_packet8`] for sixteen rays in two groups of eight (a 4×4 pixel
-    /// tile: group 0 its top two rows): `test(group, leaf, lanes, t_max)` tests the rays of a
-    /// group's `lanes` against a leaf. Returns each group's mask of lanes that hit. The
-    /// default traces the groups one after the other.
-    fn closest_leaf_packet16(
+    /// [`Accel::closest_leaf_packet8`] for `P` groups of eight rays traced together (a 4×4
+    /// pixel tile as two groups, group 0 its top two rows; or one pixel's camera samples):
+    /// `test(group, leaf, lanes, t_max)` tests the rays of a group's `lanes` against a leaf.
+    /// Returns each group's mask of lanes that hit. `P` is at most 4. The default traces the
+    /// groups one after the other.
+    fn closest_leaf_packets<const P: usize>(
         &self,
-        rays: &[[Ray; 8]; 2],
-        active: [u8; 2],
-        t_max: &mut [[f32; 8]; 2],
+        rays: &[[Ray; 8]; P],
+        active: [u8; P],
+        t_max: &mut [[f32; 8]; P],
         test: impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
-    ) -> [u8; 2] {
+    ) -> [u8; P] {
         groups_one_by_one(self, rays, active, t_max, test)
     }
 
@@ -165,18 +166,21 @@ pub(crate) fn lanes(mask: u32) -> impl Iterator<Item = usize> {
     })
 }
 
-/// [`Accel::closest_leaf_packet16`] as two packets of eight, one after the other.
-pub(crate) fn groups_one_by_one<A: Accel>(
+/// [`Accel::closest_leaf_packets`] as packets of eight, one after the other.
+pub(crate) fn groups_one_by_one<A: Accel, const P: usize>(
     accel: &A,
-    rays: &[[Ray; 8]; 2],
-    active: [u8; 2],
-    t_max: &mut [[f32; 8]; 2],
+    rays: &[[Ray; 8]; P],
+    active: [u8; P],
+    t_max: &mut [[f32; 8]; P],
     mut test: impl FnMut(usize, u32, u8, &mut [f32; 8]) -> u8,
-) -> [u8; 2] {
-    let [t0, t1] = t_max;
-    let h0 = accel.closest_leaf_packet8(&rays[0], active[0], t0, |leaf, lanes, t| test(0, leaf, lanes, t));
-    let h1 = accel.closest_leaf_packet8(&rays[1], active[1], t1, |leaf, lanes, t| test(1, leaf, lanes, t));
-    [h0, h1]
+) -> [u8; P] {
+    let mut hits = [0u8; P];
+    for (g, (t, h)) in t_max.iter_mut().zip(hits.iter_mut()).enumerate() {
+        if active[g] != 0 {
+            *h = accel.closest_leaf_packet8(&rays[g], active[g], t, |leaf, lanes, t| test(g, leaf, lanes, t));
+        }
+    }
+    hits
 }
 
 /// [`Accel::closest_leaf_packet8`] one lane at a time.
