@@ -1690,9 +1690,7 @@ mod packet {
                     continue;
                 }
                 let lanes = if c & LEAF != 0 {
-                    (0..P)
-                        .filter(|&g| active[g] != 0)
-                        .fold(0u32, |m, g| m | (slab8(&n.bounds, j, &r[g], tm[g]).1 & active[g] as u32) << (8 * g))
+                    (0..P).fold(0u32, |m, g| m | (slab8(&n.bounds, j, &r[g], tm[g]).1 & active[g] as u32) << (8 * g))
                 } else {
                     all
                 };
