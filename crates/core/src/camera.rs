@@ -109,20 +109,8 @@ impl Camera {
     ///
     /// The rays are written into `out` (a returned array was copied again by the caller).
     pub fn rays8(&self, film: &[Vec2; 8], width: u32, height: u32, lens: &[Vec2; 8], out: &mut [Ray; 8]) {
-        let Projection::Perspective { .. } = self.projection else {
-            for (i, out) in out.iter_mut().enumerate() {
-                *out = self.ray(film[i], width, height, lens[i]);
-            }
-            return;
-        };
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            for (i, out) in out.iter_mut().enumerate() {
-                *out = self.ray(film[i], width, height, lens[i]);
-            }
-        }
         #[cfg(target_arch = "x86_64")]
-        {
+        if let Projection::Perspective { .. } = self.projection {
             use std::arch::x86_64::*;
             let (w, h) = (width as f32, height as f32);
             let (fx, fy): ([f32; 8], [f32; 8]) = (film.map(|f| f.x), film.map(|f| f.y));
@@ -156,6 +144,10 @@ impl Camera {
             for (i, out) in out.iter_mut().enumerate() {
                 *out = Ray::new(self.eye, Vec3::new(d[0][i], d[1][i], d[2][i]));
             }
+            return;
+        }
+        for (i, out) in out.iter_mut().enumerate() {
+            *out = self.ray(film[i], width, height, lens[i]);
         }
     }
 }
