@@ -310,7 +310,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     .with_context(|| format!("writing {}", args.output.display()))?;
     print_stats(&stats);
     println!(
-        "{}: {}x{} at {} spp with {} ({} triangles): load {:.2} s, build {:.3} s, render {:.2} s, {:.2} Mrays/s",
+        "{}: {}x{} at {} spp with {} ({} triangles): load {:.2} s, build {:.3} s, render {:.3} s, {:.2} Mrays/s",
         args.output.display(),
         settings.width,
         settings.height,

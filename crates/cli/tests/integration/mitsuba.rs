@@ -257,6 +257,31 @@ fn every_shared_mitsuba_scene_loads_and_renders() {
     }
 }
 
+/// The speed comparison's scenes (`bench/scenes`, timed against Mitsuba by
+/// `bench/vs_mitsuba.sh`) find the shared meshes through their `scenes` parameter and describe
+/// what the README's table says: 256×256, 64 spp, paths of up to 8 segments, a diffuse mesh
+/// under a constant environment.
+#[test]
+fn bench_scenes_load_with_the_shared_meshes() {
+    for (name, mesh, tris) in
+        [("bunny-env.xml", "stanford/bunny.ply", 69_451), ("dragon-env.xml", "stanford/dragon_vrip.ply", 871_414)]
+    {
+        let Some(m) = shared_scene(mesh) else { return };
+        let root = m.parent().and_then(Path::parent).unwrap().to_string_lossy().into_owned();
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bench/scenes").join(name);
+        let l = snell_io::mitsuba::load(&p, &[("scenes".into(), root)]).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(l.scene.triangle_count(), tris, "{name}");
+        let s = &l.settings;
+        assert_eq!((s.width, s.height, s.spp, s.max_depth), (256, 256, 64, Some(8)), "{name}");
+        assert_eq!(s.integrator, snell_core::integrator::IntegratorKind::Path, "{name}");
+        assert!(matches!(l.scene.lights[..], [snell_core::light::Light::Environment(_)]), "{name}");
+        // Mitsuba's `diffuse` is one-sided.
+        let diffuse = |m: &Material| matches!(m, Material::OneSided(m) if matches!(**m, Material::Diffuse { .. }));
+        assert!(l.scene.materials.len() == 1 && diffuse(&l.scene.materials[0]), "{name}: {:?}", l.scene.materials);
+        assert!(l.warnings.is_empty(), "{name}: {:?}", l.warnings);
+    }
+}
+
 fn refs_dir() -> Option<PathBuf> {
     let scenes = shared_scene("README.md")?;
     let refs = std::env::var("SNELL_REFS")

@@ -1,0 +1,43 @@
+#!/usr/bin/env python3
+"""Times Mitsuba 3's `llvm_ad_rgb` renders of a scene: one render to compile the kernels, then
+RUNS timed renders (seeds 1..RUNS), each waited for (`dr.eval`, `dr.sync_thread`). Prints one
+time in seconds per line.
+
+    python3 bench/mitsuba_time.py SCENE.xml SPP [RUNS] [NAME=VALUE ...]
+
+NAME=VALUE pairs set the scene's <default> parameters (as `snell render -D NAME=VALUE` does).
+Needs `pip install mitsuba` and LLVM (`apt-get install libllvm19`); DRJIT_LIBLLVM_PATH defaults
+to Debian's libLLVM 19.
+"""
+import os
+import sys
+import time
+
+os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
+
+
+def main():
+    if len(sys.argv) < 3:
+        sys.exit(__doc__)
+    path, spp = sys.argv[1], int(sys.argv[2])
+    rest = sys.argv[3:]
+    runs = int(rest.pop(0)) if rest and "=" not in rest[0] else 3
+    params = dict(kv.split("=", 1) for kv in rest)
+    import drjit as dr
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_rgb")
+    scene = mi.load_file(path, **params)
+    img = mi.render(scene, spp=spp)
+    dr.eval(img)
+    dr.sync_thread()
+    for i in range(runs):
+        t = time.perf_counter()
+        img = mi.render(scene, spp=spp, seed=i + 1)
+        dr.eval(img)
+        dr.sync_thread()
+        print(f"{time.perf_counter() - t:.3f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

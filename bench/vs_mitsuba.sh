@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# Samples per second against Mitsuba 3 (`llvm_ad_rgb`), measured in one run (issue 4's and the
+# speed issue's rendering targets): for each scene, Mitsuba (three timed renders after a
+# warm-up), then each Snell binary, twice over, alternating, then Mitsuba again; all at 256x256,
+# 64 spp, the scene's depth, 2 threads (every core of the machine).
+#
+#   bench/vs_mitsuba.sh [SNELL_BINARY ...]
+#
+# Default binary: target/release/snell (built if missing). SNELL_SCENES: the shared test data
+# (default ../shared/scenes). Prints per scene the times and the ratio of Mitsuba's median time
+# to each binary's median (above 1: Snell renders more samples per second).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"
+SPP="${SPP:-64}"
+if [ $# -eq 0 ]; then
+    [ -x target/release/snell ] || cargo build --release -q
+    set -- target/release/snell
+fi
+python3 -c "import mitsuba" 2>/dev/null || { echo "Mitsuba 3 is not installed: pip install mitsuba" >&2; exit 1; }
+
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+
+median() { sort -n | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR+1)/2] : (a[NR/2] + a[NR/2+1]) / 2}'; }
+
+for scene in "$SCENES/cornell-box/cbox-rgb.xml" bench/scenes/bunny-env.xml bench/scenes/dragon-env.xml; do
+    [ -f "$scene" ] || { echo "missing $scene" >&2; exit 1; }
+    # The bench scenes find the shared meshes through their `scenes` parameter.
+    define=() snell_define=()
+    if grep -q '<default name="scenes"' "$scene"; then
+        define=("scenes=$SCENES") snell_define=(-D "scenes=$SCENES")
+    fi
+    mitsuba="$tmp/mitsuba"
+    : > "$mitsuba"
+    python3 bench/mitsuba_time.py "$scene" "$SPP" 3 "${define[@]}" >> "$mitsuba"
+    declare -A times=()
+    for round in 1 2; do
+        for bin in "$@"; do
+            t=$("$bin" render "$scene" "${snell_define[@]}" --spp "$SPP" -o "$tmp/snell.exr" 2>&1 \
+                | sed -n 's/.*render \([0-9.]*\) s.*/\1/p')
+            [ -n "$t" ] || { echo "$bin failed on $scene" >&2; exit 1; }
+            times[$bin]="${times[$bin]:-} $t"
+        done
+    done
+    python3 bench/mitsuba_time.py "$scene" "$SPP" 3 "${define[@]}" >> "$mitsuba"
+    m=$(median < "$mitsuba")
+    echo "== $(basename "$scene") at $SPP spp: Mitsuba $(sort -n "$mitsuba" | head -1)-$(sort -n "$mitsuba" | tail -1) s (median $m)"
+    for bin in "$@"; do
+        s=$(echo ${times[$bin]} | tr ' ' '\n' | median)
+        echo "   $bin:${times[$bin]} s (median $s): $(awk -v m="$m" -v s="$s" 'BEGIN {printf "%.2f", m / s}')x Mitsuba"
+    done
+    unset times
+done
