@@ -13,7 +13,7 @@ use snell_core::scene::Geometry;
 pub struct InfoArgs {
     /// Scene file (.toml, or Mitsuba 3 .xml) or mesh (.obj, .ply).
     pub scene: PathBuf,
-    /// Mitsuba scenes: set a parameter (`$name`), overriding the file's <default>.
+    /// Mitsuba scenes: set a parameter (`$name`), overriding the file's `<default>`.
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = crate::parse_define)]
     pub define: Vec<(String, String)>,
 }

@@ -49,7 +49,7 @@ struct RenderArgs {
     /// Scene file (.toml, or Mitsuba 3 .xml) or mesh (.obj, .ply). Without it, the built-in
     /// default scene.
     scene: Option<PathBuf>,
-    /// Mitsuba scenes: set a parameter (`$name`), overriding the file's <default>.
+    /// Mitsuba scenes: set a parameter (`$name`), overriding the file's `<default>`.
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     define: Vec<(String, String)>,
     /// Output image; the extension picks the format: .png (8-bit sRGB) or .exr (linear float).

@@ -29,7 +29,7 @@ pub enum SplitMethod {
     /// SAH with spatial splits (Stich, Friedrich and Dietrich 2009): where the children of the
     /// best object split overlap, the node may instead be cut by a plane, with primitives that
     /// straddle it clipped into both children. Fewer overlapping boxes, some primitives
-    /// referenced twice (the references may grow by at most [`SBVH_BUDGET`] of the count).
+    /// referenced twice (the references may grow by at most `SBVH_BUDGET`, 30 %, of the count).
     Spatial,
     /// LBVH (Lauterbach et al. 2009, Karras 2012): primitives sorted once along a Morton
     /// (Z-order) curve of their centres; each node splits where the highest differing bit of
