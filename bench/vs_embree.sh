@@ -13,6 +13,10 @@
 # Embree's two runs (above 1: Snell is faster), the build time against Embree MEDIUM's, bytes
 # per triangle, and the hit counts, which must be Embree's.
 set -euo pipefail
+# The binaries as given, made absolute before moving to the repository's root.
+bins=()
+for b in "$@"; do bins+=("$(readlink -f "$b")"); done
+set -- "${bins[@]}"
 cd "$(dirname "$0")/.."
 SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"
 TOOLS="$SCENES/../bench"

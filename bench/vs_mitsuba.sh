@@ -10,6 +10,10 @@
 # (default ../shared/scenes). Prints per scene the times and the ratio of Mitsuba's median time
 # to each binary's median (above 1: Snell renders more samples per second).
 set -euo pipefail
+# The binaries as given, made absolute before moving to the repository's root.
+bins=()
+for b in "$@"; do bins+=("$(readlink -f "$b")"); done
+set -- "${bins[@]}"
 cd "$(dirname "$0")/.."
 SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"
 SPP="${SPP:-64}"
