@@ -12,20 +12,11 @@
 # it is missing; mesh_tools.py needs numpy). Prints per mesh and binary the ratio to the mean of
 # Embree's two runs (above 1: Snell is faster), the build time against Embree MEDIUM's, bytes
 # per triangle, and the hit counts, which must be Embree's.
-set -euo pipefail
-# The binaries as given, made absolute before moving to the repository's root.
-bins=()
-for b in "$@"; do bins+=("$(readlink -f "$b")"); done
+source "$(dirname "$0")/common.sh" "$@"
 set -- "${bins[@]}"
-cd "$(dirname "$0")/.."
-SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"
 TOOLS="$SCENES/../bench"
 WORK="${WORK:-/tmp/snell-embree}"
 REPS="${REPS:-5}"
-if [ $# -eq 0 ]; then
-    [ -x target/release/snell ] || cargo build --release -q
-    set -- target/release/snell
-fi
 mkdir -p "$WORK"
 [ -x "$WORK/embree_bench" ] || bash "$TOOLS/build_embree_bench.sh" "$WORK" >&2
 

@@ -9,18 +9,9 @@
 # Default binary: target/release/snell (built if missing). SNELL_SCENES: the shared test data
 # (default ../shared/scenes). Prints per scene the times and the ratio of Mitsuba's median time
 # to each binary's median (above 1: Snell renders more samples per second).
-set -euo pipefail
-# The binaries as given, made absolute before moving to the repository's root.
-bins=()
-for b in "$@"; do bins+=("$(readlink -f "$b")"); done
+source "$(dirname "$0")/common.sh" "$@"
 set -- "${bins[@]}"
-cd "$(dirname "$0")/.."
-SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"
 SPP="${SPP:-64}"
-if [ $# -eq 0 ]; then
-    [ -x target/release/snell ] || cargo build --release -q
-    set -- target/release/snell
-fi
 python3 -c "import mitsuba" 2>/dev/null || { echo "Mitsuba 3 is not installed: pip install mitsuba" >&2; exit 1; }
 
 tmp=$(mktemp -d)
