@@ -482,10 +482,13 @@ impl Ctx {
                 return Ok(p);
             }
         }
-        Err(self.files.err(
-            n,
-            format!("file '{f}' not found (looked in {} and {})", self.main_dir.display(), including.display()),
-        ))
+        // The including file's folder is named only where it is not the main file's.
+        let looked = if including == self.main_dir {
+            self.main_dir.display().to_string()
+        } else {
+            format!("{} and {}", self.main_dir.display(), including.display())
+        };
+        Err(self.files.err(n, format!("file '{f}' not found (looked in {looked})")))
     }
 
     fn lookup(&self, r: &Node) -> Result<Node, Error> {
