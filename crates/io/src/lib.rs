@@ -47,3 +47,15 @@ pub fn read_mesh(path: &Path) -> Result<Mesh, Error> {
 pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, Error> {
     std::fs::read(path).map_err(|e| Error::io(path, e))
 }
+
+/// Reads a whole text file; bytes that are not UTF-8 are an error at their line and column
+/// (the column counted in bytes).
+pub(crate) fn read_text(path: &Path) -> Result<String, Error> {
+    String::from_utf8(read_file(path)?).map_err(|e| {
+        let bytes = e.as_bytes();
+        let bad = e.utf8_error().valid_up_to();
+        let line = 1 + bytes[..bad].iter().filter(|&&b| b == b'\n').count();
+        let col = 1 + bad - bytes[..bad].iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        Error::at(path, error::Location::LineCol(line, col), "the file is not valid UTF-8")
+    })
+}

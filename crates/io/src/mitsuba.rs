@@ -89,7 +89,7 @@ impl Files {
 
 /// Reads a file into an element tree (the root element).
 fn parse_xml(files: &mut Files, path: &Path) -> Result<Node, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::read_text(path)?;
     let file = files.paths.len();
     files.paths.push(path.to_path_buf());
     files.texts.push(text);
@@ -440,7 +440,7 @@ impl Ctx {
         }
         let pairs: Vec<(f32, f32)> = if let Some(f) = p.attr("filename") {
             let path = self.resolve(p, f)?;
-            let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+            let text = crate::read_text(&path)?;
             let mut v = Vec::new();
             for (i, line) in text.lines().enumerate() {
                 let t = line.trim();

@@ -463,7 +463,7 @@ impl Ctx {
                     self.named_spectrum(q.at, s)?
                 } else {
                     let path = self.path(q.at, s);
-                    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+                    let text = crate::read_text(&path)?;
                     let mut nums = Vec::new();
                     for (i, line) in text.lines().enumerate() {
                         let t = line.split('#').next().unwrap_or("");
@@ -1024,7 +1024,7 @@ fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> Option<Mat4> {
 
 /// Loads a pbrt-v4 scene.
 pub fn load(path: &Path) -> Result<LoadedScene, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::read_text(path)?;
     let canon = path.canonicalize().map_err(|e| Error::io(path, e))?;
     let mut cx = Ctx {
         files: Files { paths: vec![path.to_path_buf()] },
@@ -1076,7 +1076,7 @@ pub fn load(path: &Path) -> Result<LoadedScene, Error> {
                 if stream.frames.iter().any(|fr| fr.canon == canon) {
                     return Err(cx.files.err(at, format!("{d} '{f}' includes itself (a cycle)")));
                 }
-                let text = std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))?;
+                let text = crate::read_text(&p)?;
                 let idx = cx.files.paths.len();
                 cx.files.paths.push(p.clone());
                 let toks = tokenize(&text, idx, &p)?;

@@ -443,10 +443,7 @@ fn val<T: Copy>(v: &S<T>) -> Option<T> {
 
 /// Loads a scene from a TOML file.
 pub fn load(path: &Path) -> Result<LoadedScene, Error> {
-    let bytes = crate::read_file(path)?;
-    let src = String::from_utf8(bytes).map_err(|e| {
-        Error::at(path, Location::Byte(e.utf8_error().valid_up_to() as u64), "the file is not valid UTF-8")
-    })?;
+    let src = crate::read_text(path)?;
     parse(&src, path)
 }
 

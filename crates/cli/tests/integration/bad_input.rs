@@ -197,7 +197,20 @@ fn other_bad_values() {
     fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:2:9", "unknown accelerator 'octree'"]);
     fails(&[("s.txt", b"hello")], "s.txt", &[], &["s.txt", "unsupported scene format"]);
     let invalid_utf8: &[u8] = b"[render]\nspp = 1 # \xff\xfe\n";
-    fails(&[("s.toml", invalid_utf8)], "s.toml", &[], &["s.toml", "UTF-8"]);
+    fails(&[("s.toml", invalid_utf8)], "s.toml", &[], &["s.toml:2:11", "not valid UTF-8"]);
+}
+
+#[test]
+fn text_that_is_not_utf8_is_reported_where_it_is_in_every_text_format() {
+    // The first bad byte's line and column (in bytes), whichever reader opens the file.
+    let xml: &[u8] = b"<scene version=\"3.0.0\">\n  <!-- \xc3\x28 -->\n</scene>\n";
+    fails(&[("s.xml", xml)], "s.xml", &[], &["s.xml:2:8", "not valid UTF-8"]);
+    let pbrt: &[u8] = b"Camera \"perspective\"\n# caf\xe9\n";
+    fails(&[("s.pbrt", pbrt)], "s.pbrt", &[], &["s.pbrt:2:6", "not valid UTF-8"]);
+    // A file that another one includes names itself.
+    let top: &[u8] = b"<scene version=\"3.0.0\">\n<include filename=\"part.xml\"/>\n</scene>\n";
+    let part: &[u8] = b"\xff<scene version=\"3.0.0\"/>\n";
+    fails(&[("s.xml", top), ("part.xml", part)], "s.xml", &[], &["part.xml:1:1", "not valid UTF-8"]);
 }
 
 #[test]
