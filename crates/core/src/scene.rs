@@ -235,24 +235,19 @@ pub struct Intersection {
 
 /// The closest hit among `blocks` with `t < t_max`: `(triangle, hit)`.
 #[inline(always)]
-fn closest_in_blocks(blocks: &[Tri4], r4: &Ray4, mut t_max: f32, counter: &impl Counter) -> Option<(u32, TriHit)> {
-    let mut rec = None;
+fn closest_in_blocks(blocks: &[Tri4], r4: &Ray4, t_max: f32, counter: &impl Counter) -> Option<(u32, TriHit)> {
     for block in blocks {
         for _ in 0..block.len() {
             counter.prim();
         }
-        if let Some((tri, h)) = block.closest(r4, t_max) {
-            t_max = h.t;
-            rec = Some((tri, h));
-        }
     }
-    rec
+    Tri4::closest_in(blocks, r4, t_max)
 }
 
 /// Whether any triangle among `blocks` is hit with `t < t_max`.
 #[inline(always)]
 fn any_in_blocks(blocks: &[Tri4], r4: &Ray4, t_max: f32) -> bool {
-    blocks.iter().any(|block| block.any(r4, t_max))
+    Tri4::any_in(blocks, r4, t_max)
 }
 
 /// The ray prepared for the triangle tests of untransformed objects: made when the first of

@@ -96,44 +96,79 @@ impl Tri4 {
     /// to the lower lane, as a test of the lanes in order would give.
     #[inline(always)]
     pub fn closest(&self, r: &Ray4, t_max: f32) -> Option<(u32, TriHit)> {
-        #[cfg(target_arch = "x86_64")]
-        {
-            let Some((mask, t, det, v, w)) = self.lanes(r, t_max) else { return self.closest_scalar(r, t_max) };
-            if mask == 0 {
-                return None;
-            }
-            let mut lane = mask.trailing_zeros() as usize;
-            let mut rest = mask & (mask - 1);
-            while rest != 0 {
-                let j = rest.trailing_zeros() as usize;
-                rest &= rest - 1;
-                if t[j] < t[lane] {
-                    lane = j;
-                }
-            }
-            let inv = 1.0 / det[lane];
-            Some((self.id[lane], TriHit { t: t[lane], b1: v[lane] * inv, b2: w[lane] * inv }))
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            self.closest_scalar(r, t_max)
-        }
+        Tri4::closest_in(std::slice::from_ref(self), r, t_max)
     }
 
     /// Whether any of the four is hit with `0 < t < t_max`.
     #[inline(always)]
     pub fn any(&self, r: &Ray4, t_max: f32) -> bool {
+        Tri4::any_in(std::slice::from_ref(self), r, t_max)
+    }
+
+    /// The closest hit with `0 < t < t_max` among the triangles of `blocks`, tested in order:
+    /// `(triangle index, hit)`; the ray's constants are made ready once for all of them.
+    #[inline(always)]
+    pub fn closest_in(blocks: &[Tri4], r: &Ray4, mut t_max: f32) -> Option<(u32, TriHit)> {
+        let mut rec = None;
         #[cfg(target_arch = "x86_64")]
         {
-            match self.lanes(r, t_max) {
-                Some((mask, ..)) => mask != 0,
-                None => self.closest_scalar(r, t_max).is_some(),
+            let l = Lanes4::new(r);
+            for block in blocks {
+                let found = match block.lanes(&l, t_max) {
+                    Some((mask, t, det, v, w)) => Tri4::nearest(block, mask, t, det, v, w),
+                    None => block.closest_scalar(r, t_max),
+                };
+                if let Some((tri, h)) = found {
+                    t_max = h.t;
+                    rec = Some((tri, h));
+                }
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
-        {
-            self.closest_scalar(r, t_max).is_some()
+        for block in blocks {
+            if let Some((tri, h)) = block.closest_scalar(r, t_max) {
+                t_max = h.t;
+                rec = Some((tri, h));
+            }
         }
+        rec
+    }
+
+    /// Whether any triangle of `blocks` is hit with `0 < t < t_max`.
+    #[inline(always)]
+    pub fn any_in(blocks: &[Tri4], r: &Ray4, t_max: f32) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let l = Lanes4::new(r);
+            blocks.iter().any(|block| match block.lanes(&l, t_max) {
+                Some((mask, ..)) => mask != 0,
+                None => block.closest_scalar(r, t_max).is_some(),
+            })
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            blocks.iter().any(|block| block.closest_scalar(r, t_max).is_some())
+        }
+    }
+
+    /// The nearest of the lanes in `mask` (the lower lane among equal distances).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn nearest(&self, mask: u32, t: [f32; 4], det: [f32; 4], v: [f32; 4], w: [f32; 4]) -> Option<(u32, TriHit)> {
+        if mask == 0 {
+            return None;
+        }
+        let mut lane = mask.trailing_zeros() as usize;
+        let mut rest = mask & (mask - 1);
+        while rest != 0 {
+            let j = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            if t[j] < t[lane] {
+                lane = j;
+            }
+        }
+        let inv = 1.0 / det[lane];
+        Some((self.id[lane], TriHit { t: t[lane], b1: v[lane] * inv, b2: w[lane] * inv }))
     }
 
     /// The four tests in SSE lanes: `(hit mask, t, det, v, w)`, or `None` when an edge function
@@ -141,14 +176,13 @@ impl Tri4 {
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     #[allow(clippy::type_complexity)]
-    fn lanes(&self, r: &Ray4, t_max: f32) -> Option<(u32, [f32; 4], [f32; 4], [f32; 4], [f32; 4])> {
+    fn lanes(&self, l: &Lanes4, t_max: f32) -> Option<(u32, [f32; 4], [f32; 4], [f32; 4], [f32; 4])> {
         use std::arch::x86_64::*;
         // SAFETY: SSE and SSE2 are part of the x86_64 baseline. All loads read 16-byte arrays
         // inside `self` (16-byte aligned), and all stores go to local four-float arrays.
         unsafe {
-            let [kx, ky, kz] = r.k.map(usize::from);
-            let (ox, oy, oz) = (_mm_set1_ps(r.o[0]), _mm_set1_ps(r.o[1]), _mm_set1_ps(r.o[2]));
-            let (sx, sy, sz) = (_mm_set1_ps(r.s[0]), _mm_set1_ps(r.s[1]), _mm_set1_ps(r.s[2]));
+            let [kx, ky, kz] = l.k;
+            let ([ox, oy, oz], [sx, sy, sz]) = (l.o, l.s);
             // Per vertex: projected x, y and the scaled z, exactly as the scalar test.
             let project = |p: &[[f32; 4]; 3]| {
                 let x = _mm_sub_ps(_mm_load_ps(p[kx].as_ptr()), ox);
@@ -201,6 +235,33 @@ impl Tri4 {
             _mm_storeu_ps(out[2].as_mut_ptr(), v);
             _mm_storeu_ps(out[3].as_mut_ptr(), w);
             Some((_mm_movemask_ps(ok) as u32, out[0], out[1], out[2], out[3]))
+        }
+    }
+}
+
+/// A [`Ray4`]'s constants in SSE lanes with its axes as indices below 3: made once for a run
+/// of blocks (the block test alone would broadcast them again for every block).
+#[cfg(target_arch = "x86_64")]
+struct Lanes4 {
+    o: [std::arch::x86_64::__m128; 3],
+    s: [std::arch::x86_64::__m128; 3],
+    k: [usize; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes4 {
+    #[inline(always)]
+    fn new(r: &Ray4) -> Lanes4 {
+        use std::arch::x86_64::_mm_set1_ps;
+        // SAFETY: SSE is part of the x86_64 baseline.
+        unsafe {
+            Lanes4 {
+                o: r.o.map(|x| _mm_set1_ps(x)),
+                s: r.s.map(|x| _mm_set1_ps(x)),
+                // Axes are below 3 (a permutation of 0, 1, 2); saying so here spares the
+                // blocks' loads their bounds checks.
+                k: r.k.map(|a| usize::from(a).min(2)),
+            }
         }
     }
 }
