@@ -1,5 +1,5 @@
 # Sourced by the comparison scripts with their arguments (`source bench/common.sh "$@"`): makes
-# the Snell binaries given absolute (target/release/snell, built if missing, where none is
+# the Snell binaries given absolute (target/release/snell, brought up to date, where none is
 # given) into `bins`, moves to the repository's root, and sets SCENES to the shared test data
 # (SNELL_SCENES, default ../shared/scenes beside the checkout).
 set -euo pipefail
@@ -7,7 +7,8 @@ bins=()
 for b in "$@"; do bins+=("$(readlink -f "$b")"); done
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 if [ ${#bins[@]} -eq 0 ]; then
-    [ -x target/release/snell ] || cargo build --release -q
+    # Built every time (a no-op when up to date), so that an edit is never measured stale.
+    cargo build --release -q
     bins=("$PWD/target/release/snell")
 fi
 SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"

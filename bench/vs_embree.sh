@@ -6,7 +6,7 @@
 #
 #   bench/vs_embree.sh [SNELL_BINARY ...]
 #
-# Default binary: target/release/snell (built if missing). WORK (default /tmp/snell-embree)
+# Default binary: target/release/snell (brought up to date first). WORK (default /tmp/snell-embree)
 # keeps embree_bench, the meshes as both programs read them and Embree's dumped rays; they are
 # made on the first run with ../shared/bench (build_embree_bench.sh installs libembree-dev if
 # it is missing; mesh_tools.py needs numpy). Prints per mesh and binary the ratio to the mean of
@@ -18,7 +18,14 @@ TOOLS="$SCENES/../bench"
 WORK="${WORK:-/tmp/snell-embree}"
 REPS="${REPS:-5}"
 mkdir -p "$WORK"
+# WORK's contents belong to the tools that made them: when ../shared/bench changes, they are
+# made again.
+stamp=$(cat "$TOOLS/build_embree_bench.sh" "$TOOLS/embree_bench.c" "$TOOLS/mesh_tools.py" | sha256sum | cut -c1-16)
+if [ "$(cat "$WORK/tools.stamp" 2>/dev/null)" != "$stamp" ]; then
+    rm -f "$WORK/embree_bench" "$WORK"/*.bin "$WORK"/*.ply "$WORK"/*_primary.f32 "$WORK"/*_bounce.f32
+fi
 [ -x "$WORK/embree_bench" ] || bash "$TOOLS/build_embree_bench.sh" "$WORK" >&2
+echo "$stamp" > "$WORK/tools.stamp"
 
 for mesh in bunny ico dragon; do
     if [ ! -f "$WORK/$mesh.bin" ]; then

@@ -6,7 +6,7 @@
 #
 #   bench/vs_mitsuba.sh [SNELL_BINARY ...]
 #
-# Default binary: target/release/snell (built if missing). SNELL_SCENES: the shared test data
+# Default binary: target/release/snell (brought up to date first). SNELL_SCENES: the shared test data
 # (default ../shared/scenes). Prints per scene the times and the ratio of Mitsuba's median time
 # to each binary's median (above 1: Snell renders more samples per second).
 source "$(dirname "$0")/common.sh" "$@"
