@@ -1090,26 +1090,6 @@ fn imin8(a: std::arch::x86_64::__m256, b: std::arch::x86_64::__m256) -> std::arc
     _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
 }
 
-/// The slab test of node `n`'s children: their entry distances and the mask of those hit.
-/// `AVX`: in one AVX register (only after AVX2 was detected).
-#[inline(always)]
-fn node_test<const AVX: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
-    // The child references sit after the bounds, in a cache line the slab test does not read:
-    // ask for it now, so that where the node is not cached it arrives with the bounds rather
-    // than after the hit mask is known.
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is a hint with no memory effect.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch(n.child.as_ptr().cast::<i8>(), std::arch::x86_64::_MM_HINT_T0)
-    };
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: `AVX` is true only in traversals that run after AVX2 was detected.
-    let result = if AVX { unsafe { slab_avx(n, r, t_max) } } else { slab(n, r, t_max) };
-    #[cfg(not(target_arch = "x86_64"))]
-    let result = slab(n, r, t_max);
-    result
-}
-
 /// Visits interior node `n`: pushes the children hit within `t_max` onto the stack, farthest
 /// deepest, except the nearest, which is returned (`None`: no child is hit). The one- and
 /// two-child cases, by far the most common, take no loop.
@@ -1122,7 +1102,19 @@ fn visit<const AVX: bool>(
     stack: &mut [std::mem::MaybeUninit<(u32, f32)>],
     sp: &mut usize,
 ) -> Option<u32> {
-    let (t, mask) = node_test::<AVX>(n, r, t_max);
+    // The child references sit after the bounds, in a cache line the slab test does not read:
+    // ask for it now, so that where the node is not cached it arrives with the bounds rather
+    // than after the hit mask is known.
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint with no memory effect.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch(n.child.as_ptr().cast::<i8>(), std::arch::x86_64::_MM_HINT_T0)
+    };
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: `AVX` is true only in traversals that run after AVX2 was detected.
+    let (t, mask) = if AVX { unsafe { slab_avx(n, r, t_max) } } else { slab(n, r, t_max) };
+    #[cfg(not(target_arch = "x86_64"))]
+    let (t, mask) = slab(n, r, t_max);
     if mask == 0 {
         return None;
     }
@@ -1164,35 +1156,6 @@ fn visit<const AVX: bool>(
         *sp += 1;
     }
     Some(refs[k - 1])
-}
-
-/// [`visit`] for any-hit queries, which need no order: the hit children are pushed in slot
-/// order (each prefetched), and the last one is returned. Ordering them by distance, as
-/// Embree's `rtcOccluded1` does not either, cost more than it saved: the comparisons' branches
-/// are close to random.
-#[inline(always)]
-fn visit_any<const AVX: bool>(
-    nodes: &[Wide],
-    n: &Wide,
-    r: &RayPre,
-    t_max: f32,
-    stack: &mut [std::mem::MaybeUninit<(u32, f32)>],
-    sp: &mut usize,
-) -> Option<u32> {
-    let (_, mut mask) = node_test::<AVX>(n, r, t_max);
-    if mask == 0 {
-        return None;
-    }
-    loop {
-        let j = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        if mask == 0 {
-            return Some(n.child[j]);
-        }
-        prefetch_node(nodes, n.child[j]);
-        stack[*sp].write((n.child[j], 0.0));
-        *sp += 1;
-    }
 }
 
 /// Asks the cache for node `c`, a child that waits on the stack while a nearer one is
@@ -1292,8 +1255,7 @@ impl Bvh {
         hit
     }
 
-    /// The any-hit traversal ([`visit_any`]: children in slot order); `AVX` as in
-    /// [`Bvh::closest_walk`].
+    /// The any-hit traversal; `AVX` as in [`Bvh::closest_walk`].
     #[inline(always)]
     fn any_walk<const AVX: bool>(
         &self,
@@ -1329,7 +1291,7 @@ impl Bvh {
                     break;
                 }
                 counter.node();
-                match visit_any::<AVX>(&self.nodes, self.node(cur), &r, t_max, &mut stack, &mut sp) {
+                match visit::<AVX>(&self.nodes, self.node(cur), &r, t_max, &mut stack, &mut sp) {
                     Some(next) => cur = next,
                     None => break,
                 }
