@@ -244,12 +244,6 @@ fn closest_in_blocks(blocks: &[Tri4], r4: &Ray4, t_max: f32, counter: &impl Coun
     Tri4::closest_in(blocks, r4, t_max)
 }
 
-/// Whether any triangle among `blocks` is hit with `t < t_max`.
-#[inline(always)]
-fn any_in_blocks(blocks: &[Tri4], r4: &Ray4, t_max: f32) -> bool {
-    Tri4::any_in(blocks, r4, t_max)
-}
-
 /// The ray prepared for the triangle tests of untransformed objects: made when the first of
 /// them is met, then shared by the rest.
 #[inline(always)]
@@ -495,12 +489,12 @@ impl TriData {
         match self {
             TriData::Leaves { blocks, ranges, labelled } => {
                 if let Some((a, b)) = TriData::one_range(ranges) {
-                    any_in_blocks(&blocks[a as usize..b as usize], r4, t_max)
+                    Tri4::any_in(&blocks[a as usize..b as usize], r4, t_max)
                 } else {
                     accel.any_leaf_counted(
                         ray,
                         t_max,
-                        |l, tm| any_in_blocks(TriData::leaf_blocks(blocks, ranges, *labelled, l), r4, tm),
+                        |l, tm| Tri4::any_in(TriData::leaf_blocks(blocks, ranges, *labelled, l), r4, tm),
                         &NoCount,
                     )
                 }
@@ -951,7 +945,7 @@ impl<'s, A: Accel> World<'s, A> {
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
             if let Some(blocks) = self.direct_blocks(obj) {
-                return any_in_blocks(blocks, shared_ray4(&mut shared, ray), tmax);
+                return Tri4::any_in(blocks, shared_ray4(&mut shared, ray), tmax);
             }
             let o = &self.scene.objects[obj as usize];
             match &self.scene.geometries[o.geometry] {

@@ -109,24 +109,18 @@ impl Tri4 {
     /// `(triangle index, hit)`; the ray's constants are made ready once for all of them.
     #[inline(always)]
     pub fn closest_in(blocks: &[Tri4], r: &Ray4, mut t_max: f32) -> Option<(u32, TriHit)> {
-        let mut rec = None;
         #[cfg(target_arch = "x86_64")]
-        {
-            let l = Lanes4::new(r);
-            for block in blocks {
-                let found = match block.lanes(&l, t_max) {
-                    Some((mask, t, det, v, w)) => Tri4::nearest(block, mask, t, det, v, w),
-                    None => block.closest_scalar(r, t_max),
-                };
-                if let Some((tri, h)) = found {
-                    t_max = h.t;
-                    rec = Some((tri, h));
-                }
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
+        let l = Lanes4::new(r);
+        let mut rec = None;
         for block in blocks {
-            if let Some((tri, h)) = block.closest_scalar(r, t_max) {
+            #[cfg(target_arch = "x86_64")]
+            let found = match block.lanes(&l, t_max) {
+                Some((mask, t, det, v, w)) => block.nearest(mask, t, det, v, w),
+                None => block.closest_scalar(r, t_max),
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let found = block.closest_scalar(r, t_max);
+            if let Some((tri, h)) = found {
                 t_max = h.t;
                 rec = Some((tri, h));
             }
@@ -138,17 +132,14 @@ impl Tri4 {
     #[inline(always)]
     pub fn any_in(blocks: &[Tri4], r: &Ray4, t_max: f32) -> bool {
         #[cfg(target_arch = "x86_64")]
-        {
-            let l = Lanes4::new(r);
-            blocks.iter().any(|block| match block.lanes(&l, t_max) {
-                Some((mask, ..)) => mask != 0,
-                None => block.closest_scalar(r, t_max).is_some(),
-            })
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            blocks.iter().any(|block| block.closest_scalar(r, t_max).is_some())
-        }
+        let l = Lanes4::new(r);
+        blocks.iter().any(|block| {
+            #[cfg(target_arch = "x86_64")]
+            if let Some((mask, ..)) = block.lanes(&l, t_max) {
+                return mask != 0;
+            }
+            block.closest_scalar(r, t_max).is_some()
+        })
     }
 
     /// The nearest of the lanes in `mask` (the lower lane among equal distances).
