@@ -2544,6 +2544,63 @@ mod tests {
         assert!(entered > 8_000 && float_path > 4_000, "{entered} boxes entered, {float_path} float tests");
     }
 
+    /// The fused slab test ([`slab_avx`]) enters every box `slab` enters, at every scale:
+    /// scenes from 1e-15 to 1e15 across and far from the origin, rays grazing faces, edges and
+    /// corners, direction components from 1e-9 to 1 of each other (where `|o · inv|` is far
+    /// larger than the distances the planes are at).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn fused_slab_test_enters_every_box_slab_enters_at_every_scale() {
+        if !has_avx2() {
+            return;
+        }
+        let mut rng = Pcg32::new(21, 4);
+        let (mut entered, mut fused_rays) = (0, 0);
+        for case in 0..60_000 {
+            let mut v = || glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let scale = 10f32.powi((case % 11) as i32 * 3 - 15);
+            let offset = (v() - glam::Vec3::splat(0.5)) * scale * [0.0, 1.0, 1e3, 1e6][case % 4];
+            let kids = 1 + case % WIDTH;
+            let boxes: Vec<Aabb> = (0..kids)
+                .map(|_| {
+                    let c = offset + (v() * 4.0 - glam::Vec3::splat(2.0)) * scale;
+                    Aabb::EMPTY.grow(c).grow(c + v() * scale)
+                })
+                .collect();
+            let o = offset + (v() * 6.0 - glam::Vec3::splat(3.0)) * scale;
+            let b = &boxes[case % kids];
+            // A corner, an edge's midpoint or a face's centre of one box, or a point inside it.
+            let target = match case % 4 {
+                0 => b.max,
+                1 => glam::Vec3::new(b.min.x, b.max.y, 0.5 * (b.min.z + b.max.z)),
+                2 => glam::Vec3::new(b.min.x, 0.5 * (b.min.y + b.max.y), 0.5 * (b.min.z + b.max.z)),
+                _ => b.min + v() * (b.max - b.min),
+            };
+            let squash = glam::Vec3::new(1.0, 10f32.powi(-((case / 4 % 10) as i32)), 1.0);
+            let d = (target - o) * squash;
+            let inv = d.recip();
+            let ray = Ray::new(o, d);
+            let (r, t_max) = (RayPre::new(&ray, inv), if case % 2 == 0 { f32::INFINITY } else { 1.0 });
+            // SAFETY: AVX2 and FMA were detected.
+            let rf = unsafe { RayPre::new_fused(&ray, inv) };
+            let mut n = Wide::EMPTY;
+            for (j, b) in boxes.iter().enumerate() {
+                for a in 0..3 {
+                    n.bounds[a][j] = b.min[a];
+                    n.bounds[3 + a][j] = b.max[a];
+                }
+            }
+            let (_, mask) = slab(&n, &r, t_max);
+            // SAFETY: AVX2 and FMA were detected.
+            let (_, ma) = unsafe { slab_avx::<true>(&n, &rf, t_max) };
+            assert_eq!(ma & mask, mask, "case {case}: the fused test missed a box slab enters");
+            assert_eq!(ma >> kids, 0, "case {case}: empty slot entered");
+            entered += mask.count_ones();
+            fused_rays += usize::from(rf.finite);
+        }
+        assert!(entered > 10_000 && fused_rays > 50_000, "{entered} boxes entered, {fused_rays} fused rays");
+    }
+
     /// The AVX2 traversal finds what the portable one finds. Its slab test's distances differ
     /// from the portable one's by a few ulps ([`slab_avx`]), so children with almost the same
     /// entry distance may be visited in the other order and a leaf at the edge of a box may
