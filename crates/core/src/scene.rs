@@ -661,7 +661,7 @@ impl<'s, A: Accel> World<'s, A> {
             }
         }));
         let environment = lights.iter().position(|l| matches!(l, Light::Environment(_)));
-        let avx2 = crate::accel::has_avx2();
+        let avx2 = crate::accel::has_avx2_fma();
         let mut world = World {
             scene,
             top,

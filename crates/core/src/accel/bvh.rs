@@ -318,7 +318,7 @@ pub struct Bvh {
 
 /// Whether the CPU running this has AVX2 and FMA (checked once per build; every CPU with
 /// AVX2 so far has FMA as well, which the single-ray slab test uses).
-pub(crate) fn has_avx2() -> bool {
+pub(crate) fn has_avx2_fma() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
@@ -1952,7 +1952,7 @@ mod packet {
         /// spread as an orthographic camera's), random active lanes and `t_max`, random boxes.
         #[test]
         fn frustum_enters_every_box_a_ray_enters() {
-            if !crate::accel::has_avx2() {
+            if !crate::accel::has_avx2_fma() {
                 eprintln!("no AVX2: the frustum traversal is not used on this CPU");
                 return;
             }
@@ -2124,7 +2124,7 @@ impl Accel for Bvh {
             sah_cost,
         };
         let root_box = bin.first().map_or(Aabb::EMPTY, |n| n.aabb());
-        Bvh { nodes, leaves, prims, root_leaf, root_ref: LEAF, relabeled: false, root_box, stats, avx: has_avx2() }
+        Bvh { nodes, leaves, prims, root_leaf, root_ref: LEAF, relabeled: false, root_box, stats, avx: has_avx2_fma() }
     }
 
     fn closest_counted(
@@ -2487,7 +2487,7 @@ mod tests {
             let r = RayPre::new(&Ray::new(o, d), inv);
             #[cfg(target_arch = "x86_64")]
             // SAFETY: AVX2 and FMA were detected.
-            let r_fused = has_avx2().then(|| unsafe { RayPre::new_fused(&Ray::new(o, d), inv) });
+            let r_fused = has_avx2_fma().then(|| unsafe { RayPre::new_fused(&Ray::new(o, d), inv) });
             float_path += usize::from(!r.finite);
             let (t, mask) = slab(&n, &r, t_max);
             for (j, &tj) in t.iter().enumerate() {
@@ -2551,7 +2551,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn fused_slab_test_enters_every_box_slab_enters_at_every_scale() {
-        if !has_avx2() {
+        if !has_avx2_fma() {
             return;
         }
         let mut rng = Pcg32::new(21, 4);
@@ -2607,7 +2607,7 @@ mod tests {
     /// be tested by one and not the other; on these random boxes that hardly ever happens.
     #[test]
     fn avx_traversal_matches_the_portable_one() {
-        if !has_avx2() {
+        if !has_avx2_fma() {
             return;
         }
         let mut rng = Pcg32::new(11, 2);
