@@ -1285,6 +1285,14 @@ impl Bvh {
         &self.prims[first as usize..(first + count) as usize]
     }
 
+    /// Whether the AVX2 walks use the fused slab test: in trees of more than one node. A tree
+    /// of one node (the Cornell box's top level) keeps the unfused test, as the fused test's
+    /// two constants per ray cost more than one node's shorter chain gives.
+    #[inline(always)]
+    fn fused(&self) -> bool {
+        self.nodes.len() > 1
+    }
+
     /// The closest-hit traversal; `AVX`: with [`slab_avx`] (only after AVX2 and FMA were
     /// detected), `FUSED` (only with `AVX`): its fused multiply-adds.
     #[inline(always)]
@@ -2197,9 +2205,8 @@ impl Accel for Bvh {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
             // SAFETY: `avx` is set only where AVX2 was detected.
-            // A tree of one node keeps the unfused test: its rays' constants would not pay.
             return unsafe {
-                if self.nodes.len() > 1 {
+                if self.fused() {
                     self.closest_avx::<true>(ray, t_max, test, counter)
                 } else {
                     self.closest_avx::<false>(ray, t_max, test, counter)
@@ -2221,7 +2228,7 @@ impl Accel for Bvh {
         if self.avx {
             // SAFETY: `avx` is set only where AVX2 was detected.
             return unsafe {
-                if self.nodes.len() > 1 {
+                if self.fused() {
                     self.any_avx::<true>(ray, t_max, test, counter)
                 } else {
                     self.any_avx::<false>(ray, t_max, test, counter)
