@@ -2,21 +2,23 @@
 # Ray throughput against Embree 3 on the same rays, measured in one run (the speed issue's
 # tracing targets): for each mesh (bunny, displaced icosphere, dragon), Embree's benchmark
 # (quality high and medium, AVX2, 2 threads, single rays and packets), then each Snell binary
-# (`snell bench --rays`, the default accelerator), then Embree again.
+# (`snell bench --rays`, the default accelerator), then Embree again; ROUNDS (default 1) times
+# Snell then Embree, on a machine whose speed drifts from one run to the next.
 #
 #   bench/vs_embree.sh [SNELL_BINARY ...]
 #
 # Default binary: target/release/snell (brought up to date first). WORK (default /tmp/snell-embree)
 # keeps embree_bench, the meshes as both programs read them and Embree's dumped rays; they are
 # made on the first run with ../shared/bench (build_embree_bench.sh installs libembree-dev if
-# it is missing; mesh_tools.py needs numpy). Prints per mesh and binary the ratio to the mean of
-# Embree's two runs (above 1: Snell is faster), the build time against Embree MEDIUM's, bytes
-# per triangle, and the hit counts, which must be Embree's.
+# it is missing; mesh_tools.py needs numpy). Prints per mesh and binary the median over rounds
+# with its range, the ratio to the median of Embree's runs (above 1: Snell is faster), the build
+# time against Embree MEDIUM's, bytes per triangle, and the hit counts, which must be Embree's.
 source "$(dirname "$0")/common.sh" "$@"
 set -- "${bins[@]}"
 TOOLS="$SCENES/../bench"
 WORK="${WORK:-/tmp/snell-embree}"
 REPS="${REPS:-5}"
+ROUNDS="${ROUNDS:-1}"
 mkdir -p "$WORK"
 # WORK's contents belong to the tools that made them: when ../shared/bench changes, they are
 # made again.
@@ -41,16 +43,21 @@ for mesh in bunny ico dragon; do
     fi
     embree() { "$WORK/embree_bench" "$WORK/$mesh.bin" --quality high,medium --threads 2 --isa avx2 --reps "$REPS" | grep '^RESULT'; }
     out="$WORK/run_$mesh"
-    embree > "$out.e1"
-    k=0
-    for bin in "$@"; do
-        "$bin" bench "$WORK/$mesh.ply" --rays "$WORK/$mesh" --threads 2 --reps "$REPS" --json > "$out.s$k"
-        k=$((k + 1))
+    rm -f "$out".e* "$out".s*
+    # ROUNDS rounds of Embree, then each Snell binary; Embree once more at the end. On a
+    # machine whose speed drifts from one run to the next, more rounds give steadier medians.
+    embree > "$out.e0"
+    for round in $(seq 1 "$ROUNDS"); do
+        k=0
+        for bin in "$@"; do
+            "$bin" bench "$WORK/$mesh.ply" --rays "$WORK/$mesh" --threads 2 --reps "$REPS" --json > "$out.s$k.$round"
+            k=$((k + 1))
+        done
+        embree > "$out.e$round"
     done
-    embree > "$out.e2"
-    python3 - "$mesh" "$out" "$@" <<'PY'
-import json, sys
-mesh, out, bins = sys.argv[1], sys.argv[2], sys.argv[3:]
+    python3 - "$mesh" "$out" "$ROUNDS" "$@" <<'PY'
+import json, statistics, sys
+mesh, out, rounds, bins = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4:]
 
 def embree(path):
     d = {}
@@ -59,26 +66,28 @@ def embree(path):
         d[(kv["quality"], kv["api"], kv["kind"])] = kv
     return d
 
-e1, e2 = embree(out + ".e1"), embree(out + ".e2")
-mean = lambda key, field: (float(e1[key][field]) + float(e2[key][field])) / 2
-print(f"== {mesh}: Embree high/medium, run before and after")
+runs = [embree(f"{out}.e{r}") for r in range(rounds + 1)]
+med = statistics.median
+embree_of = lambda key, field: [float(e[key][field]) for e in runs]
+spread = lambda xs: f"{min(xs):.2f}" if len(xs) == 1 else f"{min(xs):.2f}-{max(xs):.2f}"
+print(f"== {mesh}: Embree high/medium, {rounds + 1} runs around {rounds} round(s) of Snell (medians)")
 rows = [("primary", ("high", "intersect1", "primary")),
         ("bounce", ("high", "intersect1", "diffuse_bounce")),
         ("bounce-occluded", ("high", "occluded1", "diffuse_bounce")),
         ("primary-packets", ("high", "intersect16", "primary"))]
 for k, b in enumerate(bins):
-    s = {j["workload"]: j for j in map(json.loads, open(f"{out}.s{k}"))}
-    p = s["primary"]
-    build = mean(("medium", "build", "bvh"), "med_ms")
-    print(f"   {b}: build {p['build_ms']:.1f} ms = {p['build_ms'] / build:.2f}x Embree MEDIUM's {build:.1f} ms; "
-          f"{p['accel_bytes'] / p['tris']:.1f} bytes/triangle")
+    s = [{j["workload"]: j for j in map(json.loads, open(f"{out}.s{k}.{r}"))} for r in range(1, rounds + 1)]
+    build = med(embree_of(("medium", "build", "bvh"), "med_ms"))
+    ours = med([x["primary"]["build_ms"] for x in s])
+    print(f"   {b}: build {ours:.1f} ms = {ours / build:.2f}x Embree MEDIUM's {build:.1f} ms; "
+          f"{s[0]['primary']['accel_bytes'] / s[0]['primary']['tris']:.1f} bytes/triangle")
     for name, key in rows:
-        em = mean(key, "mrays_med")
+        em, sn = embree_of(key, "mrays_med"), [x[name]["mrays_per_s"] for x in s]
         label = "16-ray packets" if name == "primary-packets" else name
-        print(f"     {label:16} {s[name]['mrays_per_s']:7.2f} Mrays/s vs Embree {float(e1[key]['mrays_med']):6.2f} / "
-              f"{float(e2[key]['mrays_med']):6.2f}: {s[name]['mrays_per_s'] / em:.2f}x   hits {s[name]['hits']}")
-    want = (int(e1[("high", "intersect1", "primary")]["extra"]), int(e1[("high", "occluded1", "diffuse_bounce")]["checksum"]))
-    got = (s["primary"]["hits"], s["bounce"]["hits"])
-    print(f"     hits (primary, bounce): {got}, Embree {want}" + ("" if got == want else "  <-- DIFFERENT"))
+        print(f"     {label:16} {med(sn):7.2f} Mrays/s ({spread(sn)}) vs Embree {med(em):6.2f} ({spread(em)}): "
+              f"{med(sn) / med(em):.2f}x   hits {s[0][name]['hits']}")
+    want = (int(runs[0][("high", "intersect1", "primary")]["extra"]), int(runs[0][("high", "occluded1", "diffuse_bounce")]["checksum"]))
+    got = {(x["primary"]["hits"], x["bounce"]["hits"]) for x in s}
+    print(f"     hits (primary, bounce): {sorted(got)}, Embree {want}" + ("" if got == {want} else "  <-- DIFFERENT"))
 PY
 done

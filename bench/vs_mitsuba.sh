@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Samples per second against Mitsuba 3 (`llvm_ad_rgb`), measured in one run (issue 4's and the
-# speed issue's rendering targets): for each scene, Mitsuba (three timed renders after a
-# warm-up), then each Snell binary, twice over, alternating, then Mitsuba again; all at 256x256,
-# 64 spp, the scene's depth, 2 threads (every core of the machine).
+# speed issue's rendering targets): for each scene, ROUNDS (default 2) rounds of Mitsuba (three
+# timed renders after a warm-up) and each Snell binary once, then Mitsuba again; all at 256x256,
+# 64 spp, the scene's depth, 2 threads (every core of the machine). On a machine whose speed
+# drifts from run to run, more rounds give steadier medians.
 #
 #   bench/vs_mitsuba.sh [SNELL_BINARY ...]
 #
@@ -12,6 +13,7 @@
 source "$(dirname "$0")/common.sh" "$@"
 set -- "${bins[@]}"
 SPP="${SPP:-64}"
+ROUNDS="${ROUNDS:-2}"
 python3 -c "import mitsuba" 2>/dev/null || { echo "Mitsuba 3 is not installed: pip install mitsuba" >&2; exit 1; }
 
 tmp=$(mktemp -d)
@@ -28,9 +30,9 @@ for scene in "$SCENES/cornell-box/cbox-rgb.xml" bench/scenes/bunny-env.xml bench
     fi
     mitsuba="$tmp/mitsuba"
     : > "$mitsuba"
-    python3 bench/mitsuba_time.py "$scene" "$SPP" 3 "${define[@]}" >> "$mitsuba"
     declare -A times=()
-    for round in 1 2; do
+    for round in $(seq 1 "$ROUNDS"); do
+        python3 bench/mitsuba_time.py "$scene" "$SPP" 3 "${define[@]}" >> "$mitsuba"
         for bin in "$@"; do
             t=$("$bin" render "$scene" "${snell_define[@]}" --spp "$SPP" -o "$tmp/snell.exr" 2>&1 \
                 | sed -n 's/.*render \([0-9.]*\) s.*/\1/p')
