@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
-use snell_core::accel::{Accel, AccelKind, AccelParams};
+use snell_core::accel::{Accel, AccelKind, AccelParams, AnyWorld};
 use snell_core::geometry::Ray;
 use snell_core::scene::{Geometry, Object, Scene, World};
 use snell_core::shape::Mesh;
@@ -17,9 +17,9 @@ use snell_core::{with_world, Rgb};
 pub struct BenchArgs {
     /// The mesh (.ply or .obj).
     mesh: PathBuf,
-    /// Accelerator to measure, or `all`.
-    #[arg(long, default_value = "default")]
-    accel: String,
+    /// Accelerators to measure, comma-separated (their traces alternate round by round), or `all`.
+    #[arg(long, default_value = "default", value_parser = parse_accels)]
+    accel: Accels,
     /// Worker threads for tracing (default: one per core).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
     threads: Option<u32>,
@@ -43,6 +43,24 @@ pub struct BenchArgs {
     /// Depth limit of the top-down builds (the lecture's 24 by default).
     #[arg(long, default_value_t = AccelParams::default().max_depth as u32, value_parser = clap::value_parser!(u32).range(1..=63))]
     max_depth: u32,
+}
+
+/// The accelerators `--accel` names, each once, in the order given.
+#[derive(Clone, Debug)]
+pub struct Accels(Vec<AccelKind>);
+
+fn parse_accels(s: &str) -> Result<Accels, String> {
+    if s == "all" {
+        return Ok(Accels(AccelKind::ALL.to_vec()));
+    }
+    let mut kinds = Vec::new();
+    for name in s.split(',') {
+        let kind: AccelKind = name.trim().parse()?;
+        if !kinds.contains(&kind) {
+            kinds.push(kind);
+        }
+    }
+    Ok(Accels(kinds))
 }
 
 /// One line of results.
@@ -185,43 +203,81 @@ fn subset(rays: &[Ray], kind: AccelKind, tris: usize) -> Vec<Ray> {
     }
 }
 
-fn measure<A: Accel>(
-    w: &World<A>,
-    kind: AccelKind,
-    build_ms: f64,
-    work: &[(&'static str, Vec<Ray>)],
-    reps: u32,
-) -> Vec<Row> {
-    let (_, blas) = w.structures();
-    let stats = blas.first().and_then(|b| b.as_ref()).map(|b| b.stats()).unwrap_or_default();
-    // Like Embree's figure: the structures and the triangle data their leaves point to.
-    let bytes = w.bytes();
-    work.iter()
-        .map(|(name, rays)| {
-            let rays = subset(rays, kind, w.scene.triangle_count());
-            let (nodes_per_ray, prims_per_ray) = work_per_ray(w, &rays);
-            let (hits, secs) = match *name {
-                "bounce-occluded" => timed(reps, || count_occluded(w, &rays)),
-                "primary-packets" => timed(reps, || count_closest_packets(w, &rays)),
-                _ => timed(reps, || count_closest(w, &rays)),
-            };
-            Row {
-                accel: kind,
-                build_ms,
+/// One workload traced once on `world`: the rays that hit (closest hit), or are blocked.
+fn trace(world: &AnyWorld, workload: &str, rays: &[Ray]) -> usize {
+    with_world!(world, w => match workload {
+        "bounce-occluded" => count_occluded(w, rays),
+        "primary-packets" => count_closest_packets(w, rays),
+        _ => count_closest(w, rays),
+    })
+}
+
+/// Times every workload on every built structure: per workload, one untimed pass on each
+/// structure, then `reps` rounds that trace it on each structure in turn. Taken round by round,
+/// the structures share whatever the machine does meanwhile (on a shared machine, whose speed
+/// drifts from one second to the next, their ratios steady); one structure alone is simply
+/// timed `reps` times after a warm-up. Rows come structure by structure, each the median of
+/// its rounds.
+fn measure(built: &[(AccelKind, AnyWorld, f64)], work: &[(&'static str, Vec<Ray>)], reps: u32) -> Vec<Row> {
+    struct Job {
+        rays: Vec<Ray>,
+        hits: usize,
+        secs: Vec<f64>,
+        work: (f64, f64),
+    }
+    let mut jobs: Vec<Vec<Job>> = built
+        .iter()
+        .map(|(kind, world, _)| {
+            let tris = with_world!(world, w => w.scene.triangle_count());
+            work.iter()
+                .map(|(_, rays)| {
+                    let rays = subset(rays, *kind, tris);
+                    let work = with_world!(world, w => work_per_ray(w, &rays));
+                    Job { rays, hits: 0, secs: Vec::new(), work }
+                })
+                .collect()
+        })
+        .collect();
+    for (k, (name, _)) in work.iter().enumerate() {
+        for (a, (_, world, _)) in built.iter().enumerate() {
+            jobs[a][k].hits = trace(world, name, &jobs[a][k].rays);
+        }
+        for _ in 0..reps {
+            for (a, (_, world, _)) in built.iter().enumerate() {
+                let job = &mut jobs[a][k];
+                let t0 = Instant::now();
+                job.hits = trace(world, name, &job.rays);
+                job.secs.push(t0.elapsed().as_secs_f64());
+            }
+        }
+    }
+    let mut rows = Vec::new();
+    for ((kind, world, build_ms), jobs) in built.iter().zip(jobs) {
+        let (stats, bytes) = with_world!(world, w => {
+            let (_, blas) = w.structures();
+            // Like Embree's figure: the structures and the triangle data their leaves point to.
+            (blas.first().and_then(|b| b.as_ref()).map(|b| b.stats()).unwrap_or_default(), w.bytes())
+        });
+        for ((name, _), job) in work.iter().zip(jobs) {
+            let (nodes_per_ray, prims_per_ray) = job.work;
+            rows.push(Row {
+                accel: *kind,
+                build_ms: *build_ms,
                 accel_bytes: bytes,
                 workload: name,
-                rays: rays.len(),
-                hits,
-                mrays_per_s: rays.len() as f64 / secs / 1e6,
+                rays: job.rays.len(),
+                hits: job.hits,
+                mrays_per_s: job.rays.len() as f64 / median(job.secs) / 1e6,
                 sah_cost: stats.sah_cost,
                 nodes_per_ray,
                 prims_per_ray,
                 nodes: stats.nodes,
                 leaves: stats.leaves,
                 depth: stats.max_depth,
-            }
-        })
-        .collect()
+            });
+        }
+    }
+    rows
 }
 
 /// Builds the workload: the reference's primary rays, and bounce rays from their hits.
@@ -253,11 +309,7 @@ fn workload(mesh: &Mesh, scene: &Scene, args: &BenchArgs) -> Result<Vec<(&'stati
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
-    let kinds: Vec<AccelKind> = if args.accel == "all" {
-        AccelKind::ALL.to_vec()
-    } else {
-        vec![args.accel.parse().map_err(anyhow::Error::msg)?]
-    };
+    let kinds = args.accel.0.clone();
     let mesh = snell_io::read_mesh(&args.mesh)?;
     let name = args.mesh.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tris = mesh.indices.len();
@@ -306,14 +358,21 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "depth"
         );
     }
-    for kind in kinds {
-        let params = AccelParams {
-            max_leaf_prims: args.max_leaf as usize,
-            max_depth: args.max_depth as usize,
-            ..AccelParams::default()
-        };
-        let (world, build_s) = pool.install(|| timed(args.reps, || kind.build_world(&scene, &params)));
-        let rows = pool.install(|| with_world!(&world, w => measure(w, kind, build_s * 1e3, &work, args.reps)));
+    let params = AccelParams {
+        max_leaf_prims: args.max_leaf as usize,
+        max_depth: args.max_depth as usize,
+        ..AccelParams::default()
+    };
+    // Every structure is built (and its build timed) first, so that their traces can alternate.
+    let built: Vec<(AccelKind, AnyWorld, f64)> = kinds
+        .into_iter()
+        .map(|kind| {
+            let (world, build_s) = pool.install(|| timed(args.reps, || kind.build_world(&scene, &params)));
+            (kind, world, build_s * 1e3)
+        })
+        .collect();
+    {
+        let rows = pool.install(|| measure(&built, &work, args.reps));
         for r in rows {
             if args.json {
                 println!(

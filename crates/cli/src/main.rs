@@ -161,6 +161,14 @@ pub(crate) fn parse_define(s: &str) -> Result<(String, String), String> {
 }
 
 fn main() -> ExitCode {
+    // Output piped into a reader that stops early (`snell info scene.xml | head`) ends the
+    // program quietly, as it does `cat` or `grep`, instead of making the next `println!`
+    // panic on the broken pipe (Rust ignores SIGPIPE by default).
+    #[cfg(unix)]
+    // SAFETY: called first thing, before any other thread exists; SIG_DFL is a valid handler.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => cmd_render(args),

@@ -81,8 +81,34 @@ fn replayed_ray_files_are_checked() {
     let o = run(&["bench", mesh.to_str().unwrap(), "--rays", "missing"], dir.path());
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("missing_primary.f32"), "{}", stderr(&o));
+    // An unknown accelerator is a misuse of the command line.
     let o = run(&["bench", mesh.to_str().unwrap(), "--accel", "octree"], dir.path());
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("unknown accelerator 'octree'"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_list_of_accelerators_is_measured_in_its_order_each_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = data("two-tetra.obj");
+    let args = ["--json", "--reps", "3", "--width", "32", "--height", "32", "--threads", "2"];
+    let o =
+        run(&[&["bench", mesh.to_str().unwrap(), "--accel", "kdtree,bvh-sah,kdtree"][..], &args].concat(), dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let accels: Vec<&str> = out.lines().map(|l| field(l, "accel")).collect();
+    assert_eq!(accels, ["kdtree"; 4].into_iter().chain(["bvh-sah"; 4]).collect::<Vec<_>>(), "{out}");
+    // Traced round by round, each still finds the same hits on every workload.
+    let lines: Vec<&str> = out.lines().collect();
+    for k in 0..4 {
+        assert_eq!(field(lines[k], "workload"), field(lines[k + 4], "workload"));
+        assert_eq!(field(lines[k], "hits"), field(lines[k + 4], "hits"), "{out}");
+    }
+    for bad in ["bvh-sah,", "bvh-sah,,grid", "bvh-sah,octree"] {
+        let o = run(&["bench", mesh.to_str().unwrap(), "--accel", bad], dir.path());
+        assert_eq!(o.status.code(), Some(2), "{bad}: {}", stderr(&o));
+        assert!(stderr(&o).contains("unknown accelerator"), "{bad}: {}", stderr(&o));
+    }
 }
 
 #[test]
@@ -105,4 +131,31 @@ fn bunny_primary_hits_match_embree() {
     // The bounce rays are regenerated from our own hit points (not replayed), so they differ from
     // Embree's in the last bits; the hit count still agrees closely with Embree's 38,984.
     assert!((hits - 38_984).abs() <= 40, "{hits} bounce hits; Embree has 38984");
+}
+
+/// Output into a pipe whose reader has gone (`snell bench ... | head`) ends the program
+/// quietly (SIGPIPE, or success if everything was written first), never with a panic.
+#[test]
+fn a_closed_output_pipe_is_not_a_panic() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = data("two-tetra.obj");
+    let mut child = crate::common::snell()
+        .args(["bench", mesh.to_str().unwrap(), "--accel", "all", "--reps", "2", "--width", "64", "--height", "64"])
+        .current_dir(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Close the reading end before the first line (which comes after every build and trace).
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    assert_ne!(o.status.code(), Some(101), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::ExitStatusExt;
+        // 13: SIGPIPE.
+        assert!(o.status.success() || o.status.signal() == Some(13), "{:?}", o.status);
+    }
 }
