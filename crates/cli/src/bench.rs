@@ -371,44 +371,42 @@ pub fn run(args: BenchArgs) -> Result<()> {
             (kind, world, build_s * 1e3)
         })
         .collect();
-    {
-        let rows = pool.install(|| measure(&built, &work, args.reps));
-        for r in rows {
-            if args.json {
-                println!(
-                    "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{threads},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.6},\"sah_cost\":{:.3},\"nodes_per_ray\":{:.2},\"prims_per_ray\":{:.2},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
-                    r.accel,
-                    r.build_ms,
-                    r.accel_bytes,
-                    r.workload,
-                    r.rays,
-                    r.hits,
-                    r.mrays_per_s,
-                    r.sah_cost,
-                    r.nodes_per_ray,
-                    r.prims_per_ray,
-                    r.nodes,
-                    r.leaves,
-                    r.depth
-                );
-            } else {
-                println!(
-                    "{:<12} {:>9.1} {:>8.2} {:>16} {:>8} {:>8} {:>8.2} {:>7.1} {:>8.1} {:>8.1} {:>8} {:>8} {:>5}",
-                    r.accel.name(),
-                    r.build_ms,
-                    r.accel_bytes as f64 / (1024.0 * 1024.0),
-                    r.workload,
-                    r.rays,
-                    r.hits,
-                    r.mrays_per_s,
-                    r.sah_cost,
-                    r.nodes_per_ray,
-                    r.prims_per_ray,
-                    r.nodes,
-                    r.leaves,
-                    r.depth
-                );
-            }
+    let rows = pool.install(|| measure(&built, &work, args.reps));
+    for r in rows {
+        if args.json {
+            println!(
+                "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{threads},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.6},\"sah_cost\":{:.3},\"nodes_per_ray\":{:.2},\"prims_per_ray\":{:.2},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
+                r.accel,
+                r.build_ms,
+                r.accel_bytes,
+                r.workload,
+                r.rays,
+                r.hits,
+                r.mrays_per_s,
+                r.sah_cost,
+                r.nodes_per_ray,
+                r.prims_per_ray,
+                r.nodes,
+                r.leaves,
+                r.depth
+            );
+        } else {
+            println!(
+                "{:<12} {:>9.1} {:>8.2} {:>16} {:>8} {:>8} {:>8.2} {:>7.1} {:>8.1} {:>8.1} {:>8} {:>8} {:>5}",
+                r.accel.name(),
+                r.build_ms,
+                r.accel_bytes as f64 / (1024.0 * 1024.0),
+                r.workload,
+                r.rays,
+                r.hits,
+                r.mrays_per_s,
+                r.sah_cost,
+                r.nodes_per_ray,
+                r.prims_per_ray,
+                r.nodes,
+                r.leaves,
+                r.depth
+            );
         }
     }
     Ok(())
