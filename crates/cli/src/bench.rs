@@ -309,7 +309,6 @@ fn workload(mesh: &Mesh, scene: &Scene, args: &BenchArgs) -> Result<Vec<(&'stati
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
-    let kinds = args.accel.0.clone();
     let mesh = snell_io::read_mesh(&args.mesh)?;
     let name = args.mesh.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tris = mesh.indices.len();
@@ -364,9 +363,11 @@ pub fn run(args: BenchArgs) -> Result<()> {
         ..AccelParams::default()
     };
     // Every structure is built (and its build timed) first, so that their traces can alternate.
-    let built: Vec<(AccelKind, AnyWorld, f64)> = kinds
-        .into_iter()
-        .map(|kind| {
+    let built: Vec<(AccelKind, AnyWorld, f64)> = args
+        .accel
+        .0
+        .iter()
+        .map(|&kind| {
             let (world, build_s) = pool.install(|| timed(args.reps, || kind.build_world(&scene, &params)));
             (kind, world, build_s * 1e3)
         })

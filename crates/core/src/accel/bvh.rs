@@ -1188,7 +1188,7 @@ fn visit<const AVX: bool, const FUSED: bool>(
         std::arch::x86_64::_mm_prefetch(n.child.as_ptr().cast::<i8>(), std::arch::x86_64::_MM_HINT_T0)
     };
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: `AVX` is true only in traversals that run after AVX2 was detected.
+    // SAFETY: `AVX` is true only in traversals that run after AVX2 and FMA were detected.
     let (t, mask) = if AVX { unsafe { slab_avx::<FUSED>(n, r, t_max) } } else { slab(n, r, t_max) };
     #[cfg(not(target_arch = "x86_64"))]
     let (t, mask) = slab(n, r, t_max);
@@ -2040,7 +2040,7 @@ impl Accel for Bvh {
     ) -> u8 {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 was detected.
+            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma`).
             return unsafe { packet::closest8(self, rays, active, t_max, &mut test) };
         }
         super::lane_by_lane(self, rays, active, t_max, test)
@@ -2055,7 +2055,7 @@ impl Accel for Bvh {
     ) -> [u8; P] {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 was detected.
+            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma`).
             return unsafe { packet::closest_groups(self, rays, active, t_max, &mut test) };
         }
         super::groups_one_by_one(self, rays, active, t_max, test)
@@ -2204,7 +2204,7 @@ impl Accel for Bvh {
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 was detected.
+            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma`).
             return unsafe {
                 if self.fused() {
                     self.closest_avx::<true>(ray, t_max, test, counter)
@@ -2226,7 +2226,7 @@ impl Accel for Bvh {
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 was detected.
+            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma`).
             return unsafe {
                 if self.fused() {
                     self.any_avx::<true>(ray, t_max, test, counter)
