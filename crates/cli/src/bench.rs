@@ -20,9 +20,10 @@ pub struct BenchArgs {
     /// Accelerators to measure, comma-separated (their traces alternate round by round), or `all`.
     #[arg(long, default_value = "default", value_parser = parse_accels)]
     accel: Accels,
-    /// Worker threads for tracing (default: one per core).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
-    threads: Option<u32>,
+    /// Worker threads for building and tracing (default: one per core); a comma-separated list
+    /// measures each count, their runs alternating round by round.
+    #[arg(long, value_parser = parse_threads)]
+    threads: Option<ThreadCounts>,
     /// Replay PREFIX_primary.f32 and PREFIX_bounce.f32 (as `embree_bench --dump-rays` writes them).
     #[arg(long, value_name = "PREFIX")]
     rays: Option<PathBuf>,
@@ -63,9 +64,28 @@ fn parse_accels(s: &str) -> Result<Accels, String> {
     Ok(Accels(kinds))
 }
 
+/// The thread counts `--threads` names, each once, in the order given.
+#[derive(Clone, Debug)]
+pub struct ThreadCounts(Vec<usize>);
+
+fn parse_threads(s: &str) -> Result<ThreadCounts, String> {
+    let mut counts = Vec::new();
+    for part in s.split(',') {
+        let n: usize = match part.trim().parse() {
+            Ok(n) if (1..=4096).contains(&n) => n,
+            _ => return Err(format!("'{part}' is not a thread count (1 to 4096)")),
+        };
+        if !counts.contains(&n) {
+            counts.push(n);
+        }
+    }
+    Ok(ThreadCounts(counts))
+}
+
 /// One line of results.
 struct Row {
     accel: AccelKind,
+    threads: usize,
     build_ms: f64,
     accel_bytes: usize,
     workload: &'static str,
@@ -89,21 +109,6 @@ fn median(mut v: Vec<f64>) -> f64 {
     } else {
         0.5 * (v[n / 2 - 1] + v[n / 2])
     }
-}
-
-/// Runs `f` once to warm up, then `reps` times; returns the last result and the median seconds.
-/// The previous result is dropped before the clock starts (Embree's benchmark, too, releases a
-/// scene outside its timing).
-fn timed<T>(reps: u32, mut f: impl FnMut() -> T) -> (T, f64) {
-    let mut out = f();
-    let mut t = Vec::new();
-    for _ in 0..reps {
-        drop(out);
-        let t0 = Instant::now();
-        out = f();
-        t.push(t0.elapsed().as_secs_f64());
-    }
-    (out, median(t))
 }
 
 fn count_closest<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
@@ -212,19 +217,28 @@ fn trace(world: &AnyWorld, workload: &str, rays: &[Ray]) -> usize {
     })
 }
 
-/// Times every workload on every built structure: per workload, one untimed pass on each
-/// structure, then `reps` rounds that trace it on each structure in turn. Taken round by round,
-/// the structures share whatever the machine does meanwhile (on a shared machine, whose speed
-/// drifts from one second to the next, their ratios steady); one structure alone is simply
-/// timed `reps` times after a warm-up. Rows come structure by structure, each the median of
-/// its rounds.
-fn measure(built: &[(AccelKind, AnyWorld, f64)], work: &[(&'static str, Vec<Ray>)], reps: u32) -> Vec<Row> {
+/// A structure as built: its kind, the world, and its build time (ms) with each pool.
+type Built<'s> = (AccelKind, AnyWorld<'s>, Vec<f64>);
+
+/// Times every workload on every built structure with every pool: per workload, one untimed
+/// pass on each structure with each pool, then `reps` rounds that trace it on each in turn.
+/// Taken round by round, the structures and thread counts share whatever the machine does
+/// meanwhile (on a shared machine, whose speed drifts from one second to the next, their
+/// ratios steady); one alone is simply timed `reps` times after a warm-up. Rows come structure
+/// by structure, thread count by thread count, each the median of its rounds.
+fn measure(
+    built: &[Built<'_>],
+    pools: &[(usize, rayon::ThreadPool)],
+    work: &[(&'static str, Vec<Ray>)],
+    reps: u32,
+) -> Vec<Row> {
     struct Job {
         rays: Vec<Ray>,
-        hits: usize,
-        secs: Vec<f64>,
+        hits: Vec<usize>,
+        secs: Vec<Vec<f64>>,
         work: (f64, f64),
     }
+    let first = &pools[0].1;
     let mut jobs: Vec<Vec<Job>> = built
         .iter()
         .map(|(kind, world, _)| {
@@ -232,22 +246,24 @@ fn measure(built: &[(AccelKind, AnyWorld, f64)], work: &[(&'static str, Vec<Ray>
             work.iter()
                 .map(|(_, rays)| {
                     let rays = subset(rays, *kind, tris);
-                    let work = with_world!(world, w => work_per_ray(w, &rays));
-                    Job { rays, hits: 0, secs: Vec::new(), work }
+                    let work = first.install(|| with_world!(world, w => work_per_ray(w, &rays)));
+                    Job { rays, hits: vec![0; pools.len()], secs: vec![Vec::new(); pools.len()], work }
                 })
                 .collect()
         })
         .collect();
     for (k, (name, _)) in work.iter().enumerate() {
-        for (a, (_, world, _)) in built.iter().enumerate() {
-            jobs[a][k].hits = trace(world, name, &jobs[a][k].rays);
-        }
-        for _ in 0..reps {
+        for round in 0..=reps {
             for (a, (_, world, _)) in built.iter().enumerate() {
-                let job = &mut jobs[a][k];
-                let t0 = Instant::now();
-                job.hits = trace(world, name, &job.rays);
-                job.secs.push(t0.elapsed().as_secs_f64());
+                for (p, (_, pool)) in pools.iter().enumerate() {
+                    let job = &mut jobs[a][k];
+                    let t0 = Instant::now();
+                    job.hits[p] = pool.install(|| trace(world, name, &job.rays));
+                    // Round 0 warms up.
+                    if round > 0 {
+                        job.secs[p].push(t0.elapsed().as_secs_f64());
+                    }
+                }
             }
         }
     }
@@ -258,23 +274,26 @@ fn measure(built: &[(AccelKind, AnyWorld, f64)], work: &[(&'static str, Vec<Ray>
             // Like Embree's figure: the structures and the triangle data their leaves point to.
             (blas.first().and_then(|b| b.as_ref()).map(|b| b.stats()).unwrap_or_default(), w.bytes())
         });
-        for ((name, _), job) in work.iter().zip(jobs) {
-            let (nodes_per_ray, prims_per_ray) = job.work;
-            rows.push(Row {
-                accel: *kind,
-                build_ms: *build_ms,
-                accel_bytes: bytes,
-                workload: name,
-                rays: job.rays.len(),
-                hits: job.hits,
-                mrays_per_s: job.rays.len() as f64 / median(job.secs) / 1e6,
-                sah_cost: stats.sah_cost,
-                nodes_per_ray,
-                prims_per_ray,
-                nodes: stats.nodes,
-                leaves: stats.leaves,
-                depth: stats.max_depth,
-            });
+        for (p, (threads, _)) in pools.iter().enumerate() {
+            for ((name, _), job) in work.iter().zip(&jobs) {
+                let (nodes_per_ray, prims_per_ray) = job.work;
+                rows.push(Row {
+                    accel: *kind,
+                    threads: *threads,
+                    build_ms: build_ms[p],
+                    accel_bytes: bytes,
+                    workload: name,
+                    rays: job.rays.len(),
+                    hits: job.hits[p],
+                    mrays_per_s: job.rays.len() as f64 / median(job.secs[p].clone()) / 1e6,
+                    sah_cost: stats.sah_cost,
+                    nodes_per_ray,
+                    prims_per_ray,
+                    nodes: stats.nodes,
+                    leaves: stats.leaves,
+                    depth: stats.max_depth,
+                });
+            }
         }
     }
     rows
@@ -329,20 +348,29 @@ pub fn run(args: BenchArgs) -> Result<()> {
         light_selection: Default::default(),
     };
     let Geometry::Mesh(mesh) = &scene.geometries[0] else { unreachable!("built above") };
-    let threads = args.threads.unwrap_or(0) as usize;
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("thread pool")?;
-    let threads = pool.current_num_threads();
-    let work = pool.install(|| workload(mesh, &scene, &args))?;
+    // One pool per thread count (0: one thread per core).
+    let counts = args.threads.as_ref().map_or(vec![0], |t| t.0.clone());
+    let pools = counts
+        .iter()
+        .map(|&n| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().context("thread pool")?;
+            Ok((pool.current_num_threads(), pool))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let work = pools[0].1.install(|| workload(mesh, &scene, &args))?;
     if !args.json {
+        let threads: Vec<String> = pools.iter().map(|(n, _)| n.to_string()).collect();
         println!(
-            "{name}: {tris} triangles, {} primary and {} bounce rays, {threads} threads, median of {} runs",
+            "{name}: {tris} triangles, {} primary and {} bounce rays, {} threads, median of {} runs",
             work[0].1.len(),
             work[1].1.len(),
+            threads.join(" and "),
             args.reps
         );
         println!(
-            "{:<12} {:>9} {:>8} {:>16} {:>8} {:>8} {:>8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>5}",
+            "{:<12} {:>7} {:>9} {:>8} {:>16} {:>8} {:>8} {:>8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>5}",
             "accel",
+            "threads",
             "build ms",
             "MiB",
             "workload",
@@ -362,22 +390,38 @@ pub fn run(args: BenchArgs) -> Result<()> {
         max_depth: args.max_depth as usize,
         ..AccelParams::default()
     };
-    // Every structure is built (and its build timed) first, so that their traces can alternate.
-    let built: Vec<(AccelKind, AnyWorld, f64)> = args
+    // Every structure is built (and its build timed with each pool, the pools alternating
+    // round by round, as the traces do) first, so that their traces can alternate.
+    let built: Vec<Built> = args
         .accel
         .0
         .iter()
         .map(|&kind| {
-            let (world, build_s) = pool.install(|| timed(args.reps, || kind.build_world(&scene, &params)));
-            (kind, world, build_s * 1e3)
+            let mut secs = vec![Vec::new(); pools.len()];
+            let mut world = None;
+            for round in 0..=args.reps {
+                for (p, (_, pool)) in pools.iter().enumerate() {
+                    // The previous structure is released outside the timing (as Embree's
+                    // benchmark releases its scene).
+                    drop(world.take());
+                    let t0 = Instant::now();
+                    world = Some(pool.install(|| kind.build_world(&scene, &params)));
+                    if round > 0 {
+                        secs[p].push(t0.elapsed().as_secs_f64());
+                    }
+                }
+            }
+            let world = world.expect("built in the rounds above");
+            (kind, world, secs.into_iter().map(|s| median(s) * 1e3).collect())
         })
         .collect();
-    let rows = pool.install(|| measure(&built, &work, args.reps));
+    let rows = measure(&built, &pools, &work, args.reps);
     for r in rows {
         if args.json {
             println!(
-                "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{threads},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.6},\"sah_cost\":{:.3},\"nodes_per_ray\":{:.2},\"prims_per_ray\":{:.2},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
+                "{{\"mesh\":\"{name}\",\"tris\":{tris},\"accel\":\"{}\",\"threads\":{},\"build_ms\":{:.3},\"accel_bytes\":{},\"workload\":\"{}\",\"rays\":{},\"hits\":{},\"mrays_per_s\":{:.6},\"sah_cost\":{:.3},\"nodes_per_ray\":{:.2},\"prims_per_ray\":{:.2},\"nodes\":{},\"leaves\":{},\"depth\":{}}}",
                 r.accel,
+                r.threads,
                 r.build_ms,
                 r.accel_bytes,
                 r.workload,
@@ -393,8 +437,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
             );
         } else {
             println!(
-                "{:<12} {:>9.1} {:>8.2} {:>16} {:>8} {:>8} {:>8.2} {:>7.1} {:>8.1} {:>8.1} {:>8} {:>8} {:>5}",
+                "{:<12} {:>7} {:>9.1} {:>8.2} {:>16} {:>8} {:>8} {:>8.2} {:>7.1} {:>8.1} {:>8.1} {:>8} {:>8} {:>5}",
                 r.accel.name(),
+                r.threads,
                 r.build_ms,
                 r.accel_bytes as f64 / (1024.0 * 1024.0),
                 r.workload,

@@ -112,6 +112,39 @@ fn a_list_of_accelerators_is_measured_in_its_order_each_once() {
 }
 
 #[test]
+fn a_list_of_thread_counts_is_measured_per_accelerator_each_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = data("two-tetra.obj");
+    let args = ["--json", "--reps", "2", "--width", "32", "--height", "32", "--accel", "bvh-sah,grid"];
+    let o = run(&[&["bench", mesh.to_str().unwrap(), "--threads", "1,2,1"][..], &args].concat(), dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let lines: Vec<&str> = out.lines().collect();
+    // Structure by structure, then thread count (in the order given, each once), then workload.
+    let order: Vec<(&str, &str)> = lines.iter().map(|l| (field(l, "accel"), field(l, "threads"))).collect();
+    let mut expected = Vec::new();
+    for accel in ["bvh-sah", "grid"] {
+        for threads in ["1", "2"] {
+            expected.extend([(accel, threads); 4]);
+        }
+    }
+    assert_eq!(order, expected, "{out}");
+    // Every structure with every thread count finds the same hits on each workload.
+    for k in 0..4 {
+        let hits: Vec<&str> = (0..4).map(|g| field(lines[g * 4 + k], "hits")).collect();
+        assert!(hits.windows(2).all(|w| w[0] == w[1]), "{out}");
+        assert!(lines.iter().skip(k).step_by(4).all(|l| field(l, "workload") == field(lines[k], "workload")));
+    }
+    // Each row carries its own build time.
+    assert!(lines.iter().all(|l| field(l, "build_ms").parse::<f64>().unwrap() >= 0.0));
+    for bad in ["1,", "0", "1,x", "", "5000"] {
+        let o = run(&["bench", mesh.to_str().unwrap(), "--threads", bad], dir.path());
+        assert_eq!(o.status.code(), Some(2), "{bad}: {}", stderr(&o));
+        assert!(stderr(&o).contains("is not a thread count"), "{bad}: {}", stderr(&o));
+    }
+}
+
+#[test]
 fn bunny_primary_hits_match_embree() {
     let Some(p) = shared_scene("stanford/bunny.ply") else {
         return;
