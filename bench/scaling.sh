@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# Two threads against one (the speed issue's scaling target, 1.9x for tracing and rendering),
+# measured so that both sides share the machine's drift:
+# - tracing and building: `snell bench MESH --threads 1,2` (the two thread counts alternated
+#   round by round inside one process) on the bunny, the displaced icosphere and the dragon;
+# - rendering: `snell render SCENE --threads 1` then `--threads 2`, ROUNDS (default 3) times, on
+#   the Cornell box and the bunny and dragon under a constant environment, 256x256, 64 spp.
+#
+#   bench/scaling.sh [SNELL_BINARY]
+#
+# Default binary: target/release/snell (brought up to date first). WORK (default
+# /tmp/snell-embree, shared with vs_embree.sh) keeps the icosphere (mesh_tools.py needs numpy).
+# Prints per workload the median one- and two-thread figures and their ratio.
+source "$(dirname "$0")/common.sh" "$@"
+bin="${bins[0]}"
+TOOLS="$SCENES/../bench"
+WORK="${WORK:-/tmp/snell-embree}"
+REPS="${REPS:-9}"
+SPP="${SPP:-64}"
+ROUNDS="${ROUNDS:-3}"
+mkdir -p "$WORK"
+[ -f "$WORK/ico.ply" ] || python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 6 --displace --out "$WORK/ico" >&2
+
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+
+for mesh in "$SCENES/stanford/bunny.ply" "$WORK/ico.ply" "$SCENES/stanford/dragon_vrip.ply"; do
+    [ -f "$mesh" ] || { echo "missing $mesh" >&2; exit 1; }
+    "$bin" bench "$mesh" --threads 1,2 --reps "$REPS" --json > "$tmp/bench.json"
+    python3 - "$mesh" "$tmp/bench.json" <<'PY'
+import json, os, sys
+rows = [json.loads(line) for line in open(sys.argv[2])]
+by = {(r["threads"], r["workload"]): r for r in rows}
+print(f"== tracing {os.path.basename(sys.argv[1])}: 1 and 2 threads alternated, medians")
+for w in ["primary", "primary-packets", "bounce", "bounce-occluded"]:
+    one, two = by[(1, w)]["mrays_per_s"], by[(2, w)]["mrays_per_s"]
+    print(f"   {w:<16} {one:7.2f} -> {two:7.2f} Mrays/s: {two / one:.2f}x")
+one, two = by[(1, "primary")]["build_ms"], by[(2, "primary")]["build_ms"]
+print(f"   {'build':<16} {one:7.1f} -> {two:7.1f} ms:      {one / two:.2f}x")
+PY
+done
+
+median() { sort -n | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR+1)/2] : (a[NR/2] + a[NR/2+1]) / 2}'; }
+
+for scene in "$SCENES/cornell-box/cbox-rgb.xml" bench/scenes/bunny-env.xml bench/scenes/dragon-env.xml; do
+    [ -f "$scene" ] || { echo "missing $scene" >&2; exit 1; }
+    define=()
+    grep -q '<default name="scenes"' "$scene" && define=(-D "scenes=$SCENES")
+    declare -A times=()
+    for round in $(seq 1 "$ROUNDS"); do
+        for threads in 1 2; do
+            t=$("$bin" render "$scene" "${define[@]}" --spp "$SPP" --threads "$threads" -o "$tmp/out.exr" 2>&1 \
+                | sed -n 's/.*render \([0-9.]*\) s.*/\1/p')
+            [ -n "$t" ] || { echo "$bin failed on $scene" >&2; exit 1; }
+            times[$threads]="${times[$threads]:-} $t"
+        done
+    done
+    one=$(echo ${times[1]} | tr ' ' '\n' | median)
+    two=$(echo ${times[2]} | tr ' ' '\n' | median)
+    echo "== rendering $(basename "$scene") at $SPP spp, 1 then 2 threads, $ROUNDS rounds"
+    echo "   1 thread:${times[1]} s; 2 threads:${times[2]} s; medians $one -> $two s: $(awk -v a="$one" -v b="$two" 'BEGIN {printf "%.2f", a / b}')x"
+    unset times
+done
