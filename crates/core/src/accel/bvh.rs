@@ -1205,7 +1205,7 @@ fn visit<const AVX: bool, const FUSED: bool, const ANY: bool>(
         // Any hit ends the walk, so the order does not matter: the first child hit is taken
         // next and the others pushed as they come, without the distances' compare (a branch
         // that incoherent rays mispredict) or sort. As Embree's occlusion walk does; any-hit
-        // rays +2-11 % (bunny, icosphere, dragon; bounce rays and the mostly blocked camera
+        // rays +2-17 % (bunny, icosphere, dragon; bounce rays and the mostly blocked camera
         // rays alike).
         let mut m = rest;
         while m != 0 {
