@@ -12,3 +12,23 @@ if [ ${#bins[@]} -eq 0 ]; then
     bins=("$PWD/target/release/snell")
 fi
 SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"
+
+# The scenes the rendering comparisons use: the measured Cornell box, and the bunny and dragon
+# under a constant environment (which find the shared meshes through their `scenes` parameter).
+render_scenes=("$SCENES/cornell-box/cbox-rgb.xml" bench/scenes/bunny-env.xml bench/scenes/dragon-env.xml)
+
+# The median of the numbers on standard input, one per line.
+median() { sort -n | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR+1)/2] : (a[NR/2] + a[NR/2+1]) / 2}'; }
+
+# render_time BIN SCENE [ARGS...]: renders SCENE with BIN (to a temporary EXR) and prints the
+# render time in seconds from its summary line; fails if there is none.
+render_time() {
+    local bin=$1 scene=$2 define=() out t
+    shift 2
+    grep -q '<default name="scenes"' "$scene" && define=(-D "scenes=$SCENES")
+    out=$(mktemp --suffix .exr)
+    t=$("$bin" render "$scene" "${define[@]}" -o "$out" "$@" 2>&1 | sed -n 's/.*render \([0-9.]*\) s.*/\1/p')
+    rm -f "$out"
+    [ -n "$t" ] || { echo "$bin failed on $scene" >&2; return 1; }
+    echo "$t"
+}

@@ -40,18 +40,12 @@ print(f"   {'build':<16} {one:7.1f} -> {two:7.1f} ms:      {one / two:.2f}x")
 PY
 done
 
-median() { sort -n | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR+1)/2] : (a[NR/2] + a[NR/2+1]) / 2}'; }
-
-for scene in "$SCENES/cornell-box/cbox-rgb.xml" bench/scenes/bunny-env.xml bench/scenes/dragon-env.xml; do
+for scene in "${render_scenes[@]}"; do
     [ -f "$scene" ] || { echo "missing $scene" >&2; exit 1; }
-    define=()
-    grep -q '<default name="scenes"' "$scene" && define=(-D "scenes=$SCENES")
     declare -A times=()
     for round in $(seq 1 "$ROUNDS"); do
         for threads in 1 2; do
-            t=$("$bin" render "$scene" "${define[@]}" --spp "$SPP" --threads "$threads" -o "$tmp/out.exr" 2>&1 \
-                | sed -n 's/.*render \([0-9.]*\) s.*/\1/p')
-            [ -n "$t" ] || { echo "$bin failed on $scene" >&2; exit 1; }
+            t=$(render_time "$bin" "$scene" --spp "$SPP" --threads "$threads")
             times[$threads]="${times[$threads]:-} $t"
         done
     done

@@ -19,24 +19,18 @@ python3 -c "import mitsuba" 2>/dev/null || { echo "Mitsuba 3 is not installed: p
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
-median() { sort -n | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR+1)/2] : (a[NR/2] + a[NR/2+1]) / 2}'; }
-
-for scene in "$SCENES/cornell-box/cbox-rgb.xml" bench/scenes/bunny-env.xml bench/scenes/dragon-env.xml; do
+for scene in "${render_scenes[@]}"; do
     [ -f "$scene" ] || { echo "missing $scene" >&2; exit 1; }
     # The bench scenes find the shared meshes through their `scenes` parameter.
-    define=() snell_define=()
-    if grep -q '<default name="scenes"' "$scene"; then
-        define=("scenes=$SCENES") snell_define=(-D "scenes=$SCENES")
-    fi
+    define=()
+    grep -q '<default name="scenes"' "$scene" && define=("scenes=$SCENES")
     mitsuba="$tmp/mitsuba"
     : > "$mitsuba"
     declare -A times=()
     for round in $(seq 1 "$ROUNDS"); do
         python3 bench/mitsuba_time.py "$scene" "$SPP" 3 "${define[@]}" >> "$mitsuba"
         for bin in "$@"; do
-            t=$("$bin" render "$scene" "${snell_define[@]}" --spp "$SPP" -o "$tmp/snell.exr" 2>&1 \
-                | sed -n 's/.*render \([0-9.]*\) s.*/\1/p')
-            [ -n "$t" ] || { echo "$bin failed on $scene" >&2; exit 1; }
+            t=$(render_time "$bin" "$scene" --spp "$SPP")
             times[$bin]="${times[$bin]:-} $t"
         done
     done

@@ -54,14 +54,7 @@ fn parse_accels(s: &str) -> Result<Accels, String> {
     if s == "all" {
         return Ok(Accels(AccelKind::ALL.to_vec()));
     }
-    let mut kinds = Vec::new();
-    for name in s.split(',') {
-        let kind: AccelKind = name.trim().parse()?;
-        if !kinds.contains(&kind) {
-            kinds.push(kind);
-        }
-    }
-    Ok(Accels(kinds))
+    parse_list(s, |name| name.parse()).map(Accels)
 }
 
 /// The thread counts `--threads` names, each once, in the order given.
@@ -69,17 +62,23 @@ fn parse_accels(s: &str) -> Result<Accels, String> {
 pub struct ThreadCounts(Vec<usize>);
 
 fn parse_threads(s: &str) -> Result<ThreadCounts, String> {
-    let mut counts = Vec::new();
+    parse_list(s, |part| match part.parse() {
+        Ok(n) if (1..=4096).contains(&n) => Ok(n),
+        _ => Err(format!("'{part}' is not a thread count (1 to 4096)")),
+    })
+    .map(ThreadCounts)
+}
+
+/// A comma-separated list, each item parsed by `one` (trimmed), each kept once in the order given.
+fn parse_list<T: PartialEq>(s: &str, one: impl Fn(&str) -> Result<T, String>) -> Result<Vec<T>, String> {
+    let mut items = Vec::new();
     for part in s.split(',') {
-        let n: usize = match part.trim().parse() {
-            Ok(n) if (1..=4096).contains(&n) => n,
-            _ => return Err(format!("'{part}' is not a thread count (1 to 4096)")),
-        };
-        if !counts.contains(&n) {
-            counts.push(n);
+        let item = one(part.trim())?;
+        if !items.contains(&item) {
+            items.push(item);
         }
     }
-    Ok(ThreadCounts(counts))
+    Ok(items)
 }
 
 /// One line of results.
