@@ -1,6 +1,7 @@
 //! `snell`: the command-line front end. Exit status 0 on success, 1 for bad input (a scene or
 //! mesh that cannot be read, an output that cannot be written), 2 for command-line misuse.
 
+mod alloc;
 mod bench;
 mod diff;
 mod info;
@@ -18,6 +19,9 @@ use snell_core::integrator::{IntegratorKind, RayStats};
 use snell_core::render::{render_with_aovs, RenderSettings};
 use snell_core::with_world;
 use snell_io::scene::LoadedScene;
+
+#[global_allocator]
+static ALLOCATOR: alloc::HugePages = alloc::HugePages::GLOBAL;
 
 /// The built-in default scene (`snell render` with no scene file).
 const DEFAULT_SCENE: &str = include_str!("../../../scenes/default.toml");
@@ -161,6 +165,7 @@ pub(crate) fn parse_define(s: &str) -> Result<(String, String), String> {
 }
 
 fn main() -> ExitCode {
+    alloc::init();
     // Output piped into a reader that stops early (`snell info scene.xml | head`) ends the
     // program quietly, as it does `cat` or `grep`, instead of making the next `println!`
     // panic on the broken pipe (Rust ignores SIGPIPE by default).
