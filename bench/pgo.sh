@@ -8,14 +8,16 @@
 #
 # The training workload deliberately leaves out the benchmarks' own scenes and meshes (the
 # Cornell box, the bunny, the dragon, the icosphere), so that what bench/vs_mitsuba.sh and
-# bench/vs_embree.sh measure with this binary is not a workload it was trained on: the built-in
-# default scene and the repository's TOML scenes but the bunnies (Whitted and path tracing), Veach's MIS scene,
-# the teapot under an HDR environment map, Spot and Suzanne under a constant one, and
-# `snell bench` on the teapot and a reduced dragon (its own camera and bounce rays).
+# bench/vs_embree.sh measure with this binary is not a workload it was trained on. It renders
+# the built-in default scene (Whitted and path tracing), the repository's TOML scenes but
+# bunnies.toml, Veach's MIS scene, the teapot under an HDR environment map, and Spot and
+# Suzanne as bare meshes (clay on a floor under an area light), and runs `snell bench` with its
+# own camera and bounce rays on the teapot and on a reduced dragon (dragon_vrip_res2.ply, a
+# different mesh from the measured dragon_vrip.ply).
 #
 # Needs the toolchain's llvm-profdata (`rustup component add llvm-tools-preview`, done here
 # when missing) and the shared test data (SNELL_SCENES, default ../shared/scenes). Takes about
-# ten minutes on two cores: both builds compile every dependency.
+# seven minutes on two cores: both builds compile every dependency.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"
@@ -39,8 +41,8 @@ echo "pgo: instrumented build" >&2
 RUSTFLAGS="-Cprofile-generate=$raw" cargo build --release -q -p snell --target-dir "$root/gen"
 gen=$root/gen/release/snell
 
-# The teapot under an HDR environment (importance-sampled map, rough plastic, a Mitsuba scene),
-# and the other meshes under a constant environment (bare meshes, diffuse).
+# The teapot under an HDR environment (an importance-sampled map, rough plastic, a Mitsuba
+# scene).
 cat > "$tmp/teapot-env.xml" <<EOF
 <scene version="3.0.0">
     <integrator type="path"><integer name="max_depth" value="6"/></integrator>
