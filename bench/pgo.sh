@@ -61,7 +61,10 @@ cat > "$tmp/teapot-env.xml" <<EOF
 EOF
 
 echo "pgo: training" >&2
-run() { "$gen" "$@" > /dev/null 2>&1 || { echo "pgo: training run failed: snell $*" >&2; exit 1; }; }
+# A training run that fails stops the script with snell's own message.
+run() {
+    "$gen" "$@" > "$tmp/run.log" 2>&1 || { cat "$tmp/run.log" >&2; echo "pgo: training run failed: snell $*" >&2; exit 1; }
+}
 run render -o "$tmp/default.png" --spp 4 --width 256 --height 256
 run render -o "$tmp/default-path.png" --spp 32 --width 256 --height 256 --integrator path
 for s in scenes/*.toml; do

@@ -8,12 +8,9 @@
 //! this does the same. A block of at least [`HUGE`] bytes is aligned to [`HUGE`] and advised,
 //! so that every whole 2 MiB of it can be one page (Linux, where transparent huge pages are
 //! enabled as `always` or `madvise`; on other systems every block is placed as the system
-//! allocator places it). Smaller blocks are the system allocator's, untouched.
+//! allocator places it). Smaller blocks are the system allocator's, untouched. What it gains is
+//! measured in the README ("Measured", twenty-first session).
 //!
-//! Measured on the bench's rays (both structures in one process, their traces alternated;
-//! README, "Measured", twenty-first session): bounce and any-hit rays 0–8 % faster, primary
-//! rays unchanged; the dragon's page faults 177,500 → 20,115 over eight builds, which build
-//! 15–20 % faster.
 //! `SNELL_HUGE_PAGES=0` in the environment turns it off (for comparisons).
 
 use std::alloc::{GlobalAlloc, Layout, System};
