@@ -205,6 +205,62 @@ fn bvh_statistics_are_sane() {
     assert!(soup.sah_cost > 1.0 && soup.sah_cost < m.indices.len() as f32);
 }
 
+/// Trees of a single wide node (a top level of at most eight objects, a mesh of at most eight
+/// leaves) are queried without a stack, nearest child first: they give brute force's hits,
+/// through edges, coplanar pieces and objects that overlap (ties), with one and with several
+/// triangles per leaf.
+#[test]
+fn one_node_trees_match_brute_force() {
+    let mut rng = Pcg32::new(11, 5);
+    // 40 triangles: more than a mesh tested block by block, few enough for one node's leaves.
+    let mut soup = Mesh::default();
+    for _ in 0..40 {
+        let c = rand_vec(&mut rng, 1.5);
+        for _ in 0..3 {
+            soup.positions.push(c + rand_vec(&mut rng, 0.8));
+        }
+    }
+    soup.indices = (0..40).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    let quad = Mesh::quad(Vec3::new(-2.0, -2.0, 0.0), Vec3::X * 4.0, Vec3::Y * 4.0);
+    let cube = Mesh::cuboid(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let geometries = vec![
+        Geometry::Mesh(soup),
+        Geometry::Mesh(quad),
+        Geometry::Mesh(cube),
+        Geometry::Sphere(Sphere { center: Vec3::ZERO, radius: 0.7 }),
+    ];
+    let moved = |x: f32, y: f32, z: f32| Transform::try_new(Affine3A::from_translation(Vec3::new(x, y, z)));
+    // Seven objects: the soup, the quad twice in one plane (ties), cubes overlapping the sphere.
+    let objects = vec![
+        object(0, None),
+        object(1, None),
+        object(1, moved(1.0, 0.0, 0.0)),
+        object(2, None),
+        object(2, moved(0.3, 0.2, 0.1)),
+        object(3, None),
+        object(3, moved(2.0, 1.0, -1.0)),
+    ];
+    let scene = scene_of(geometries, objects);
+    // Aimed at the objects from all around, and the shared adversarial rays.
+    let mut rays: Vec<Ray> = (0..3000)
+        .map(|_| {
+            let o = rand_vec(&mut rng, 5.0);
+            Ray::new(o, rand_vec(&mut rng, 1.5) - o)
+        })
+        .collect();
+    rays.extend(self::rays(&scene, 1000, 4));
+    for max_leaf_prims in [1, 4] {
+        let params =
+            BvhParams { split: SplitMethod::Sah, base: AccelParams { max_leaf_prims, ..AccelParams::default() } };
+        let world: World<Bvh> = World::build(&scene, &params);
+        let (top, blas) = world.structures();
+        assert_eq!(top.stats().nodes, 1, "{:?}", top.stats());
+        let soup = blas[0].as_ref().unwrap().stats();
+        assert!(soup.nodes == 1 && soup.leaves > 1, "{soup:?}");
+        check_against_brute::<Bvh>(&format!("one node/{max_leaf_prims}"), &scene, &params, &rays);
+    }
+}
+
 /// The top level keeps one object per leaf whatever the SAH would prefer: every object's box is
 /// tested before its own structure is entered (merging small objects into one leaf made the
 /// default scene 25 % slower).
