@@ -1425,8 +1425,8 @@ impl Bvh {
         hit
     }
 
-    /// [`Bvh::any_walk`] in a tree of one node: the hit children in slot order, without a
-    /// stack.
+    /// [`Bvh::any_walk`] in a tree of one node: the hit children in the walk's order, without
+    /// a stack.
     #[inline(always)]
     fn any_in_root<const AVX: bool, const FUSED: bool>(
         &self,
@@ -1437,8 +1437,18 @@ impl Bvh {
     ) -> bool {
         let n = &self.nodes[0];
         counter.node();
-        let (_, mask) = node_slab::<AVX, FUSED>(n, r, t_max);
-        super::lanes(mask).any(|j| test(n.child[j] & !LEAF, t_max))
+        let (_, mut mask) = node_slab::<AVX, FUSED>(n, r, t_max);
+        // The lowest slot first, then the others from the highest down: the walk's order
+        // (the first child hit taken, the others pushed in slot order and popped).
+        let mut j = mask.trailing_zeros() as usize;
+        while mask != 0 {
+            mask &= !(1 << j);
+            if test(n.child[j] & !LEAF, t_max) {
+                return true;
+            }
+            j = 31usize.wrapping_sub(mask.leading_zeros() as usize);
+        }
+        false
     }
 
     /// The any-hit traversal; `AVX` and `FUSED` as in [`Bvh::closest_walk`].
