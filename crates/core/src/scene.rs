@@ -777,6 +777,13 @@ impl<'s, A: Accel> World<'s, A> {
         let mut best: Option<(u32, u32, f32, f32)> = None;
         let mut t = t_max;
         let mut shared = None;
+        if let Some((accel, tris)) = self.one_tree() {
+            // One untransformed mesh: its tree is entered straight from here.
+            counter.prim();
+            let mut t = t_max;
+            let (prim, h) = tris.closest(accel, ray, &Ray4::new(WatertightRay::new(ray.o, ray.d)), &mut t, counter)?;
+            return Some(RawHit { t, object: 0, prim, b1: h.b1, b2: h.b2 });
+        }
         let mut test = |obj: u32, tmax: f32| {
             counter.prim();
             let (prim, h) = self.closest_in_object(obj, ray, &mut shared, tmax, counter)?;
@@ -846,6 +853,19 @@ impl<'s, A: Accel> World<'s, A> {
             }
             _ => None,
         }
+    }
+
+    /// The tree and triangles of a scene that is one untransformed mesh in leaves (as
+    /// [`World::packet_tree`] finds it): single-ray queries enter its tree straight away,
+    /// past the layers that test objects (`World::closest_in_object` and the like).
+    #[inline(always)]
+    fn one_tree(&self) -> Option<(&A, &TriData)> {
+        if !self.packets || self.scene.objects.len() != 1 {
+            return None;
+        }
+        // With one object, `packets` says `packet_tree` found it such a mesh.
+        let g = self.scene.objects[0].geometry;
+        Some((self.blas[g].as_ref()?, &self.tris[g]))
     }
 
     /// Whether packets traverse the top level together: several objects, each leaf of the top
@@ -942,6 +962,9 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        if let Some((accel, tris)) = self.one_tree() {
+            return tris.any(accel, ray, &Ray4::new(WatertightRay::new(ray.o, ray.d)), t_max);
+        }
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
             if let Some(blocks) = self.direct_blocks(obj) {

@@ -123,6 +123,10 @@ fn check_against_brute<A: Accel>(name: &str, scene: &Scene, params: &A::Params, 
                 if a.object != b.object {
                     assert!((a.t - b.t).abs() <= tol, "{name} ray {i}: object {} vs brute {}", b.object, a.object);
                 }
+                // The same point, found from the hit triangle and its barycentrics (a tie
+                // between triangles is the same point too).
+                let p_tol = 1e-4 * a.t.max(1.0) + 1e-5 * scene_scale(scene);
+                assert!((a.p - b.p).length() <= p_tol, "{name} ray {i}: p {} vs brute {}", b.p, a.p);
                 // Any hit agrees with closest hit. The margin covers the triangle test's own
                 // error, which grows with the coordinates (the ±1e6 quad reports t to ~1e-3).
                 let margin = a.t * 1e-3 + 1e-6 * scene_scale(scene);
@@ -258,6 +262,44 @@ fn one_node_trees_match_brute_force() {
         let soup = blas[0].as_ref().unwrap().stats();
         assert!(soup.nodes == 1 && soup.leaves > 1, "{soup:?}");
         check_against_brute::<Bvh>(&format!("one node/{max_leaf_prims}"), &scene, &params, &rays);
+    }
+}
+
+/// A scene of one untransformed mesh in leaves (the bench's meshes, the bunny and dragon
+/// renders) is queried by its own tree straight from `World::hit` and `World::occluded`,
+/// past the object layers: closest and any-hit queries against brute force, on a displaced
+/// icosphere and on a triangle soup whose triangles cross, for several leaf sizes and builds.
+#[test]
+fn one_mesh_scenes_match_brute_force() {
+    let mut rng = Pcg32::new(17, 3);
+    let mut ball = Mesh::icosphere(3);
+    for p in ball.positions.iter_mut() {
+        *p *= 1.0 + 0.3 * rng.next_f32();
+    }
+    let mut soup = Mesh::default();
+    for i in 0..300u32 {
+        let c = rand_vec(&mut rng, 1.5);
+        soup.positions.extend((0..3).map(|_| c + rand_vec(&mut rng, 0.6)));
+        soup.indices.push([3 * i, 3 * i + 1, 3 * i + 2]);
+    }
+    for (name, mesh) in [("ball", ball), ("soup", soup)] {
+        let scene = scene_of(vec![Geometry::Mesh(mesh)], vec![object(0, None)]);
+        // Aimed at the mesh from all around, and the shared adversarial rays.
+        let mut rays: Vec<Ray> = (0..3000)
+            .map(|_| {
+                let o = rand_vec(&mut rng, 5.0);
+                Ray::new(o, rand_vec(&mut rng, 1.0) - o)
+            })
+            .collect();
+        rays.extend(self::rays(&scene, 1000, 8));
+        for split in [SplitMethod::Sah, SplitMethod::Spatial] {
+            for max_leaf_prims in [1, 4, 8] {
+                let params = BvhParams { split, base: AccelParams { max_leaf_prims, ..AccelParams::default() } };
+                let world: World<Bvh> = World::build(&scene, &params);
+                assert!(world.structures().1[0].as_ref().unwrap().stats().leaves > 1);
+                check_against_brute::<Bvh>(&format!("{name}/{split:?}/{max_leaf_prims}"), &scene, &params, &rays);
+            }
+        }
     }
 }
 
