@@ -9,7 +9,7 @@
 //! so that every whole 2 MiB of it can be one page (Linux, where transparent huge pages are
 //! enabled as `always` or `madvise`; on other systems every block is placed as the system
 //! allocator places it). Smaller blocks are the system allocator's, untouched. What it gains is
-//! measured in the README ("Measured", twenty-first session).
+//! measured in MEASUREMENTS.md (twenty-first session).
 //!
 //! `SNELL_HUGE_PAGES=0` in the environment turns it off (for comparisons).
 
