@@ -62,14 +62,17 @@ impl Accum {
         self.depth += o.depth;
     }
 
-    /// Adds one sample with filter weight `w`.
-    #[inline]
-    fn add(&mut self, s: &Accum, w: f32) {
+    /// Adds one sample with filter weight `w`; `aovs`: its AOVs too (without them, only the
+    /// radiance and the weight are summed, the rest staying zero).
+    #[inline(always)]
+    fn add(&mut self, s: &Accum, w: f32, aovs: bool) {
         self.l += s.l * w;
         self.w += w;
-        self.albedo += s.albedo * w;
-        self.normal += s.normal * w;
-        self.depth += s.depth * w;
+        if aovs {
+            self.albedo += s.albedo * w;
+            self.normal += s.normal * w;
+            self.depth += s.depth * w;
+        }
     }
 }
 
@@ -166,8 +169,11 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                 let bw = (x1 - x0 + 2 * m) as usize;
                 let mut acc = vec![Accum::default(); bw * (y1 - y0 + 2 * m) as usize];
                 let mut packets = CameraPackets::new();
+                let aovs = settings.aovs;
                 for y in y0..y1 {
                     for x in x0..x1 {
+                        // The pixel's own accumulator.
+                        let own = (y + m - y0) as usize * bw + (x + m - x0) as usize;
                         render_pixel(
                             world,
                             integrator,
@@ -178,9 +184,8 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                             &mut stats,
                             &mut packets,
                             &mut |film, sample| {
-                                let own = (y + m - y0) as usize * bw + (x + m - x0) as usize;
                                 if !splat {
-                                    acc[own].add(&sample, 1.0);
+                                    acc[own].add(&sample, 1.0, aovs);
                                     return;
                                 }
                                 if m == 0 {
@@ -189,7 +194,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                                     let wx = settings.filter.eval_1d(film.x - (x as f32 + 0.5));
                                     let wy = settings.filter.eval_1d(film.y - (y as f32 + 0.5));
                                     if wy != 0.0 && wx * wy != 0.0 {
-                                        acc[own].add(&sample, wx * wy);
+                                        acc[own].add(&sample, wx * wy, aovs);
                                     }
                                     return;
                                 }
@@ -209,7 +214,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                                     for (k, px) in (lo_x..=hi_x).enumerate() {
                                         let wt = wx[k] * wy;
                                         if wt != 0.0 {
-                                            acc[row + (px + m - x0) as usize].add(&sample, wt);
+                                            acc[row + (px + m - x0) as usize].add(&sample, wt, aovs);
                                         }
                                     }
                                 }
