@@ -773,8 +773,11 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// [`World::hit`], reporting the nodes visited and primitives tested at both levels.
     pub fn hit_counted(&self, ray: &Ray, t_max: f32, counter: &impl Counter) -> Option<RawHit> {
-        // (object, primitive, b1, b2)
-        let mut best: Option<(u32, u32, f32, f32)> = None;
+        // (object and primitive as one word, b1, b2). The object test below writes it and the
+        // end of this function reads it back: kept as one word, its store and its load have the
+        // same width, so the load is forwarded from the store (two 4-byte stores read as one
+        // 8-byte load would stall it).
+        let mut best: Option<(u64, f32, f32)> = None;
         let mut t = t_max;
         let mut shared = None;
         if let Some((accel, tris)) = self.one_tree() {
@@ -787,7 +790,7 @@ impl<'s, A: Accel> World<'s, A> {
         let mut test = |obj: u32, tmax: f32| {
             counter.prim();
             let (prim, h) = self.closest_in_object(obj, ray, &mut shared, tmax, counter)?;
-            best = Some((obj, prim, h.b1, h.b2));
+            best = Some((obj as u64 | (prim as u64) << 32, h.b1, h.b2));
             Some(h.t)
         };
         if self.scene.objects.len() == 1 {
@@ -800,8 +803,8 @@ impl<'s, A: Accel> World<'s, A> {
         } else {
             self.top.closest_counted(ray, &mut t, test, counter);
         }
-        let (object, prim, b1, b2) = best?;
-        Some(RawHit { t, object, prim, b1, b2 })
+        let (key, b1, b2) = best?;
+        Some(RawHit { t, object: key as u32, prim: (key >> 32) as u32, b1, b2 })
     }
 
     /// The closest hit on object `obj` with `t < tmax`: `(primitive, hit)` (a sphere is

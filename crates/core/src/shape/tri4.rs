@@ -115,7 +115,7 @@ impl Tri4 {
         for block in blocks {
             #[cfg(target_arch = "x86_64")]
             let found = match block.lanes(&l, t_max) {
-                Some((mask, t, det, v, w)) => block.nearest(mask, t, det, v, w),
+                Some((mask, t, inv, v, w)) => block.nearest(mask, t, inv, v, w),
                 None => block.closest_scalar(r, t_max),
             };
             #[cfg(not(target_arch = "x86_64"))]
@@ -142,10 +142,11 @@ impl Tri4 {
         })
     }
 
-    /// The nearest of the lanes in `mask` (the lower lane among equal distances).
+    /// The nearest of the lanes in `mask` (the lower lane among equal distances); `inv` holds
+    /// each lane's `1 / det`, as the lane test worked it out.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    fn nearest(&self, mask: u32, t: [f32; 4], det: [f32; 4], v: [f32; 4], w: [f32; 4]) -> Option<(u32, TriHit)> {
+    fn nearest(&self, mask: u32, t: [f32; 4], inv: [f32; 4], v: [f32; 4], w: [f32; 4]) -> Option<(u32, TriHit)> {
         if mask == 0 {
             return None;
         }
@@ -158,11 +159,13 @@ impl Tri4 {
                 lane = j;
             }
         }
-        let inv = 1.0 / det[lane];
+        // The scalar test's `1.0 / det`: a lane of the SIMD quotient is the same IEEE quotient,
+        // taken from there rather than divided again at the end of the query's critical path.
+        let inv = inv[lane];
         Some((self.id[lane], TriHit { t: t[lane], b1: v[lane] * inv, b2: w[lane] * inv }))
     }
 
-    /// The four tests in SSE lanes: `(hit mask, t, det, v, w)`, or `None` when an edge function
+    /// The four tests in SSE lanes: `(hit mask, t, 1 / det, v, w)`, or `None` when an edge function
     /// of a lane not already rejected is exactly zero (the scalar test must decide those).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
@@ -218,11 +221,12 @@ impl Tri4 {
             if _mm_movemask_ps(ok) == 0 {
                 return Some((0, [0.0; 4], [0.0; 4], [0.0; 4], [0.0; 4]));
             }
-            let t = _mm_mul_ps(ts, _mm_div_ps(_mm_set1_ps(1.0), det));
+            let inv = _mm_div_ps(_mm_set1_ps(1.0), det);
+            let t = _mm_mul_ps(ts, inv);
             ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmpgt_ps(t, zero), _mm_cmplt_ps(t, tmax)));
             let mut out = [[0.0f32; 4]; 4];
             _mm_storeu_ps(out[0].as_mut_ptr(), t);
-            _mm_storeu_ps(out[1].as_mut_ptr(), det);
+            _mm_storeu_ps(out[1].as_mut_ptr(), inv);
             _mm_storeu_ps(out[2].as_mut_ptr(), v);
             _mm_storeu_ps(out[3].as_mut_ptr(), w);
             Some((_mm_movemask_ps(ok) as u32, out[0], out[1], out[2], out[3]))
@@ -338,7 +342,7 @@ impl Tri4 {
         let sign_bit = _mm256_set1_ps(-0.0);
         // SAFETY: an unaligned load of eight floats.
         let tmax = unsafe { _mm256_loadu_ps(t_max.as_ptr()) };
-        let (mut bt, mut bdet, mut bv, mut bw, mut bj) =
+        let (mut bt, mut binv, mut bv, mut bw, mut bj) =
             (_mm256_set1_ps(f32::INFINITY), zero, zero, zero, _mm256_setzero_si256());
         let (mut undecided, mut found) = (0u32, 0u32);
         for j in 0..4 {
@@ -387,7 +391,8 @@ impl Tri4 {
             let ts_abs = _mm256_xor_ps(ts, sign);
             ok = _mm256_andnot_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(ts_abs, zero), ok);
             ok = _mm256_andnot_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(ts_abs, _mm256_mul_ps(tmax, abs_det)), ok);
-            let t = _mm256_mul_ps(ts, _mm256_div_ps(_mm256_set1_ps(1.0), det));
+            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+            let t = _mm256_mul_ps(ts, inv);
             ok = _mm256_and_ps(
                 ok,
                 _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(t, tmax)),
@@ -396,7 +401,7 @@ impl Tri4 {
             let take = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LT_OQ>(t, bt));
             found |= _mm256_movemask_ps(take) as u32;
             bt = _mm256_blendv_ps(bt, t, take);
-            bdet = _mm256_blendv_ps(bdet, det, take);
+            binv = _mm256_blendv_ps(binv, inv, take);
             bv = _mm256_blendv_ps(bv, v, take);
             bw = _mm256_blendv_ps(bw, w, take);
             bj = _mm256_blendv_epi8(bj, _mm256_set1_epi32(j as i32), _mm256_castps_si256(take));
@@ -408,13 +413,13 @@ impl Tri4 {
             // SAFETY: unaligned stores into local arrays of eight elements.
             unsafe {
                 _mm256_storeu_ps(out[0].as_mut_ptr(), bt);
-                _mm256_storeu_ps(out[1].as_mut_ptr(), bdet);
+                _mm256_storeu_ps(out[1].as_mut_ptr(), binv);
                 _mm256_storeu_ps(out[2].as_mut_ptr(), bv);
                 _mm256_storeu_ps(out[3].as_mut_ptr(), bw);
                 _mm256_storeu_si256(js.as_mut_ptr().cast(), bj);
             }
             for lane in crate::accel::lanes(found.into()) {
-                let inv = 1.0 / out[1][lane];
+                let inv = out[1][lane];
                 t_max[lane] = out[0][lane];
                 best[lane] = Some((
                     self.id[js[lane] as usize],
