@@ -3,7 +3,7 @@
 
 use std::f32::consts::PI;
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec3A};
 
 use crate::geometry::orthonormal_basis;
 use crate::sampling::{sample_cdf, uniform_cone, uniform_triangle};
@@ -150,7 +150,7 @@ impl Environment {
             return None;
         }
         let value = self.eval(wi) / pdf;
-        Some(LightSample { wi, p: p + wi, n: Vec3::ZERO, infinite: true, value, pdf })
+        Some(LightSample::new(wi, p + wi, Vec3::ZERO, true, value, pdf))
     }
 }
 
@@ -290,22 +290,35 @@ impl SphericalRectangle {
 }
 
 /// Light arriving at a shading point from one light sample.
+///
+/// The vectors are kept in 16-byte lanes. A sample is built in one of several arms and read
+/// by the integrator after they join, so it passes through memory: as 12-byte vectors the arms
+/// stored them in pieces (8 + 4 bytes) that the integrator's loads did not match (4 + 8), and
+/// each such load waited for the stores to retire (a store-forwarding stall) at every light
+/// sample. Whole 16-byte stores and loads forward.
 #[derive(Clone, Copy, Debug)]
 pub struct LightSample {
     /// Unit direction from the shading point towards the light.
-    pub wi: Vec3,
+    pub wi: Vec3A,
     /// Point on the light (for the shadow ray); meaningless for directional lights.
-    pub p: Vec3,
+    pub p: Vec3A,
     /// Surface normal at `p` (zero for point and spot lights).
-    pub n: Vec3,
+    pub n: Vec3A,
     /// Whether the light is at infinity (shadow ray without end point).
     pub infinite: bool,
     /// Incident radiance divided by the sampling pdf (solid angle), so that
     /// `f · cos · value` estimates the reflected radiance.
-    pub value: Rgb,
+    pub value: Vec3A,
     /// The solid-angle pdf of `wi` (0 for point, spot and directional lights: delta lights,
     /// which no BSDF sample can hit).
     pub pdf: f32,
+}
+
+impl LightSample {
+    #[inline(always)]
+    fn new(wi: Vec3, p: Vec3, n: Vec3, infinite: bool, value: Rgb, pdf: f32) -> LightSample {
+        LightSample { wi: wi.into(), p: p.into(), n: n.into(), infinite, value: value.into(), pdf }
+    }
 }
 
 impl Light {
@@ -327,14 +340,7 @@ impl Light {
             Light::Point { position, intensity } => {
                 let d = *position - p;
                 let d2 = d.length_squared();
-                (d2 > 0.0).then(|| LightSample {
-                    wi: d / d2.sqrt(),
-                    p: *position,
-                    n: Vec3::ZERO,
-                    infinite: false,
-                    value: *intensity / d2,
-                    pdf: 0.0,
-                })
+                (d2 > 0.0).then(|| LightSample::new(d / d2.sqrt(), *position, Vec3::ZERO, false, *intensity / d2, 0.0))
             }
             Light::Spot { position, direction, intensity, cos_inner, cos_outer } => {
                 let d = *position - p;
@@ -345,23 +351,12 @@ impl Light {
                 let wi = d / d2.sqrt();
                 let cos = (-wi).dot(*direction);
                 let falloff = smoothstep(*cos_outer, *cos_inner, cos);
-                (falloff > 0.0).then(|| LightSample {
-                    wi,
-                    p: *position,
-                    n: Vec3::ZERO,
-                    infinite: false,
-                    value: *intensity * (falloff / d2),
-                    pdf: 0.0,
-                })
+                (falloff > 0.0)
+                    .then(|| LightSample::new(wi, *position, Vec3::ZERO, false, *intensity * (falloff / d2), 0.0))
             }
-            Light::Directional { direction, irradiance } => Some(LightSample {
-                wi: -*direction,
-                p: p - *direction,
-                n: Vec3::ZERO,
-                infinite: true,
-                value: *irradiance,
-                pdf: 0.0,
-            }),
+            Light::Directional { direction, irradiance } => {
+                Some(LightSample::new(-*direction, p - *direction, Vec3::ZERO, true, *irradiance, 0.0))
+            }
             Light::Area(a) => a.sample(p, u),
             Light::Environment(e) => e.sample(p, u),
         }
@@ -468,7 +463,7 @@ impl AreaLight {
                 let q = p + wi * t;
                 let n = (q - s.center).normalize();
                 let pdf = 1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12));
-                Some(LightSample { wi, p: q, n, infinite: false, value: self.emission / pdf, pdf })
+                Some(LightSample::new(wi, q, n, false, self.emission / pdf, pdf))
             }
             AreaShape::Rectangle { corner, ex, ey, normal, area } => {
                 if (p - *corner).dot(*normal) <= 0.0 {
@@ -483,7 +478,7 @@ impl AreaLight {
                             return None;
                         }
                         let pdf = (1.0 / r.solid_angle) as f32;
-                        Some(LightSample { wi, p: q, n: *normal, infinite: false, value: self.emission / pdf, pdf })
+                        Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
                     }
                     None => {
                         let q = *corner + *ex * u.x + *ey * u.y;
@@ -495,7 +490,7 @@ impl AreaLight {
                             return None;
                         }
                         let pdf = dist2 / (cos_l * area);
-                        Some(LightSample { wi, p: q, n: *normal, infinite: false, value: self.emission / pdf, pdf })
+                        Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
                     }
                 }
             }
@@ -521,7 +516,7 @@ impl AreaLight {
                 }
                 // Area pdf 1/A converted to solid angle: dist² / (cos_l · A).
                 let pdf = dist2 / (cos_l * total);
-                Some(LightSample { wi, p: q, n, infinite: false, value: self.emission / pdf, pdf })
+                Some(LightSample::new(wi, q, n, false, self.emission / pdf, pdf))
             }
         }
     }
@@ -614,7 +609,7 @@ mod tests {
             assert!(
                 s.p.x >= -1e-4 && s.p.x <= 4.0001 && s.p.y >= -1e-4 && s.p.y <= 2.0001 && (s.p.z - 1.0).abs() < 1e-5
             );
-            let pdf = l.pdf(Vec3::ZERO, s.p, s.n);
+            let pdf = l.pdf(Vec3::ZERO, s.p.into(), s.n.into());
             assert!((pdf - s.pdf).abs() < 1e-5 * s.pdf, "{pdf} vs {}", s.pdf);
             let solid_angle = 1.0 / s.pdf as f64;
             assert!(solid_angle > 0.0 && solid_angle < 2.0 * std::f64::consts::PI);
@@ -629,7 +624,7 @@ mod tests {
         let s = small.sample(Vec3::ZERO, Vec2::new(0.3, 0.8)).unwrap();
         let area_pdf = s.p.length_squared() / (s.wi.z * 1.0);
         assert!((s.pdf - area_pdf).abs() < 1e-5 * area_pdf, "{} vs {area_pdf}", s.pdf);
-        assert!((small.pdf(Vec3::ZERO, s.p, s.n) - area_pdf).abs() < 1e-5 * area_pdf);
+        assert!((small.pdf(Vec3::ZERO, s.p.into(), s.n.into()) - area_pdf).abs() < 1e-5 * area_pdf);
         // Far away, where the solid angle is tiny, it falls back to area sampling (same answer).
         let far = rectangle(Vec3::new(-0.05, -0.05, 20.0), Vec3::new(0.0, 0.1, 0.0), Vec3::new(0.1, 0.0, 0.0));
         let e = irradiance(&far, 10_000);
@@ -712,9 +707,9 @@ mod tests {
             for _ in 0..n {
                 // `None` only where a direction rounds into a black cell (measure zero).
                 let Some(s) = e.sample(Vec3::ZERO, rng.next_2d()) else { continue };
-                assert!((s.pdf - e.pdf(s.wi)).abs() <= 1e-3 * s.pdf, "{} vs {}", s.pdf, e.pdf(s.wi));
+                assert!((s.pdf - e.pdf(s.wi.into())).abs() <= 1e-3 * s.pdf, "{} vs {}", s.pdf, e.pdf(s.wi.into()));
                 assert!(s.infinite && (s.wi.length() - 1.0).abs() < 1e-5);
-                est += s.value / n as f32;
+                est += Vec3::from(s.value) / n as f32;
             }
             let mut exact = Rgb::ZERO;
             for i in 0..nt {

@@ -18,7 +18,7 @@ use crate::material::Frame;
 use crate::sampling::Sampler;
 use crate::scene::{Intersection, World};
 use crate::Rgb;
-use glam::Vec3A;
+use glam::{Vec3, Vec3A};
 
 /// Path tracing with next-event estimation and MIS.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -125,17 +125,18 @@ impl Integrator for Path {
                 if let Some((li, p_choose)) = world.choose_light(rng.next_f32()) {
                     let u = rng.next_2d();
                     if let Some(ls) = world.lights[li].sample(hit.p, u) {
-                        let wi = frame.to_local(ls.wi);
+                        let ls_wi = Vec3::from(ls.wi);
+                        let wi = frame.to_local(ls_wi);
                         // Reflection must stay on the side of the geometric normal it started on,
                         // transmission must cross it.
-                        let same_side = (ls.wi.dot(ng) > 0.0) == (wo_world.dot(ng) > 0.0);
+                        let same_side = (ls_wi.dot(ng) > 0.0) == (wo_world.dot(ng) > 0.0);
                         let f = if same_side == (wi.z * wo.z > 0.0) { bsdf.eval(wo, wi) } else { Rgb::ZERO };
                         if f.max_element() > 0.0 && ls.value.max_element() > 0.0 {
                             stats.shadow += 1;
                             let blocked = if ls.infinite {
-                                world.occluded(&spawn_ray(hit.p, ng, ls.wi), f32::INFINITY)
+                                world.occluded(&spawn_ray(hit.p, ng, ls_wi), f32::INFINITY)
                             } else {
-                                let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p, ls.n);
+                                let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p.into(), ls.n.into());
                                 world.occluded(&r, t_max)
                             };
                             if !blocked {
@@ -144,7 +145,7 @@ impl Integrator for Path {
                                 } else {
                                     1.0
                                 };
-                                l += beta * Vec3A::from(f) * Vec3A::from(ls.value) * (w / p_choose);
+                                l += beta * Vec3A::from(f) * ls.value * (w / p_choose);
                             }
                         }
                     }

@@ -228,22 +228,23 @@ impl Whitted {
                 let Some(ls) = light.sample(hit.p, u) else {
                     continue;
                 };
-                if ls.wi.dot(ng) <= 0.0 {
+                let ls_wi = Vec3::from(ls.wi);
+                if ls_wi.dot(ng) <= 0.0 {
                     continue; // Light below the geometric surface.
                 }
-                let f = bsdf.eval(wo_local, frame.to_local(ls.wi));
+                let f = bsdf.eval(wo_local, frame.to_local(ls_wi));
                 if f.max_element() <= 0.0 || ls.value.max_element() <= 0.0 {
                     continue;
                 }
                 cx.stats.shadow += 1;
                 let blocked = if ls.infinite {
-                    cx.world.occluded(&spawn_ray(hit.p, ng, ls.wi), f32::INFINITY)
+                    cx.world.occluded(&spawn_ray(hit.p, ng, ls_wi), f32::INFINITY)
                 } else {
-                    let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p, ls.n);
+                    let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p.into(), ls.n.into());
                     cx.world.occluded(&r, t_max)
                 };
                 if !blocked {
-                    acc += f * ls.value;
+                    acc += f * Vec3::from(ls.value);
                 }
             }
             sum += acc / n as f32;
