@@ -1085,14 +1085,19 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
 /// least the exact one (times `EXIT_ROUNDING`), so it enters every box `slab` enters, at
 /// distances at most a few ulps of `|o · inv|` apart. Rays with a zero component take
 /// `slab`'s arithmetic.
+///
+/// The entry distances go straight into the caller's `out` (the traversal's own array) and the
+/// hit mask is returned: returned as an array with the mask, they were stored once and copied,
+/// a second store-to-load round trip before the children's order is known (single rays 2-3 %
+/// faster, the bench's instructions 1.6 % fewer).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
+fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
     if r.finite {
-        slab_avx_with::<true, FUSED>(n, r, t_max)
+        slab_avx_with::<true, FUSED>(n, r, t_max, out)
     } else {
-        slab_avx_float(n, r, t_max)
+        slab_avx_float(n, r, t_max, out)
     }
 }
 
@@ -1101,8 +1106,8 @@ fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH
 #[target_feature(enable = "avx2,fma")]
 #[cold]
 #[inline(never)]
-fn slab_avx_float(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
-    slab_avx_with::<false, false>(n, r, t_max)
+fn slab_avx_float(n: &Wide, r: &RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+    slab_avx_with::<false, false>(n, r, t_max, out)
 }
 
 /// [`slab_avx`]'s arithmetic: maxima and minima on the floats' bits where `INT`, float ones
@@ -1111,7 +1116,7 @@ fn slab_avx_float(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn slab_avx_with<const INT: bool, const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
+fn slab_avx_with<const INT: bool, const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
     use std::arch::x86_64::*;
     const { assert!(WIDTH == 8, "one AVX register holds eight children") };
     let b = &n.bounds;
@@ -1143,10 +1148,9 @@ fn slab_avx_with<const INT: bool, const FUSED: bool>(n: &Wide, r: &RayPre, t_max
     } else {
         _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
     };
-    let mut out = [0.0f32; WIDTH];
-    // SAFETY: an unaligned store into a local array of eight floats.
+    // SAFETY: an unaligned store into an array of eight floats.
     unsafe { _mm256_storeu_ps(out.as_mut_ptr(), tn) };
-    (out, mask)
+    mask
 }
 
 /// The lane-wise maximum of the floats' bits as integers.
@@ -1167,15 +1171,18 @@ fn imin8(a: std::arch::x86_64::__m256, b: std::arch::x86_64::__m256) -> std::arc
     _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
 }
 
-/// The slab test of node `n`'s children: [`slab_avx`] where `AVX`, [`slab`] otherwise.
+/// The slab test of node `n`'s children: [`slab_avx`] where `AVX`, [`slab`] otherwise; the
+/// entry distances go to `t`, the hit mask is returned.
 #[inline(always)]
-fn node_slab<const AVX: bool, const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
+fn node_slab<const AVX: bool, const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32, t: &mut [f32; WIDTH]) -> u32 {
     #[cfg(target_arch = "x86_64")]
     if AVX {
         // SAFETY: `AVX` is true only in traversals that run after AVX2 and FMA were detected.
-        return unsafe { slab_avx::<FUSED>(n, r, t_max) };
+        return unsafe { slab_avx::<FUSED>(n, r, t_max, t) };
     }
-    slab(n, r, t_max)
+    let mask;
+    (*t, mask) = slab(n, r, t_max);
+    mask
 }
 
 /// Visits interior node `n`: pushes the children hit within `t_max` onto the stack, farthest
@@ -1199,7 +1206,8 @@ fn visit<const AVX: bool, const FUSED: bool, const ANY: bool>(
     unsafe {
         std::arch::x86_64::_mm_prefetch(n.child.as_ptr().cast::<i8>(), std::arch::x86_64::_MM_HINT_T0)
     };
-    let (t, mask) = node_slab::<AVX, FUSED>(n, r, t_max);
+    let mut t = [0.0f32; WIDTH];
+    let mask = node_slab::<AVX, FUSED>(n, r, t_max, &mut t);
     if mask == 0 {
         return None;
     }
@@ -1408,7 +1416,8 @@ impl Bvh {
     ) -> bool {
         let n = &self.nodes[0];
         counter.node();
-        let (t, mut mask) = node_slab::<AVX, FUSED>(n, r, *t_max);
+        let mut t = [0.0f32; WIDTH];
+        let mut mask = node_slab::<AVX, FUSED>(n, r, *t_max, &mut t);
         let mut hit = false;
         while mask != 0 {
             let j = nearest_lane(&t, mask);
@@ -1437,7 +1446,7 @@ impl Bvh {
     ) -> bool {
         let n = &self.nodes[0];
         counter.node();
-        let (_, mut mask) = node_slab::<AVX, FUSED>(n, r, t_max);
+        let mut mask = node_slab::<AVX, FUSED>(n, r, t_max, &mut [0.0; WIDTH]);
         // The lowest slot first, then the others from the highest down: the walk's order
         // (the first child hit taken, the others pushed in slot order and popped).
         let mut j = mask.trailing_zeros() as usize;
@@ -2413,6 +2422,15 @@ fn binary_sah_cost(nodes: &[Node], params: &AccelParams) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`slab_avx`] with its entry distances returned. The CPU must support AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn slab_avx_pair<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
+        let mut t = [0.0f32; WIDTH];
+        // SAFETY: the caller checked for AVX2 and FMA.
+        let mask = unsafe { slab_avx::<FUSED>(n, r, t_max, &mut t) };
+        (t, mask)
+    }
     use crate::accel::NoCount;
     use crate::sampling::Pcg32;
 
@@ -2622,11 +2640,11 @@ mod tests {
             if let Some(r_fused) = r_fused {
                 // Unfused: `slab`'s arithmetic, so its distances and mask.
                 // SAFETY: AVX2 and FMA were detected.
-                let (tu, mu) = unsafe { slab_avx::<false>(&n, &r, t_max) };
+                let (tu, mu) = unsafe { slab_avx_pair::<false>(&n, &r, t_max) };
                 assert_eq!((tu.map(f32::to_bits), mu), (t.map(f32::to_bits), mask), "case {case}");
                 let r = r_fused;
                 // SAFETY: AVX2 and FMA were detected.
-                let (ta, ma) = unsafe { slab_avx::<true>(&n, &r, t_max) };
+                let (ta, ma) = unsafe { slab_avx_pair::<true>(&n, &r, t_max) };
                 if !r.finite {
                     // `slab`'s arithmetic, so its distances and mask.
                     assert_eq!((ta.map(f32::to_bits), ma), (t.map(f32::to_bits), mask), "case {case}");
@@ -2704,7 +2722,7 @@ mod tests {
             }
             let (_, mask) = slab(&n, &r, t_max);
             // SAFETY: AVX2 and FMA were detected.
-            let (_, ma) = unsafe { slab_avx::<true>(&n, &rf, t_max) };
+            let (_, ma) = unsafe { slab_avx_pair::<true>(&n, &rf, t_max) };
             assert_eq!(ma & mask, mask, "case {case}: the fused test missed a box slab enters");
             assert_eq!(ma >> kids, 0, "case {case}: empty slot entered");
             entered += mask.count_ones();
