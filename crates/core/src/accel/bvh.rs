@@ -2422,6 +2422,8 @@ fn binary_sah_cost(nodes: &[Node], params: &AccelParams) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::NoCount;
+    use crate::sampling::Pcg32;
 
     /// [`slab_avx`] with its entry distances returned. The CPU must support AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
@@ -2431,8 +2433,6 @@ mod tests {
         let mask = unsafe { slab_avx::<FUSED>(n, r, t_max, &mut t) };
         (t, mask)
     }
-    use crate::accel::NoCount;
-    use crate::sampling::Pcg32;
 
     /// Every plane, empty bins included, as the sweep looked before it skipped them.
     fn sweep_every_plane<const N: usize>(bins: &Bins<N>, n: &[usize; N], block: usize) -> Option<(f32, usize)> {
