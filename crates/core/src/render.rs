@@ -159,6 +159,12 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
     // Splatting: how far beyond its tile a sample's filter reaches, in pixels.
     let m = if splat { ((settings.filter.radius() - 0.5).max(0.0).ceil() as u32).min(MAX_SPLAT_MARGIN) } else { 0 };
     let strata = Strata::new(settings.spp);
+    // Splatting through a box at least a pixel wide (Mitsuba's default `box`): every sample
+    // lies in its own pixel, within the box's reach on both axes (`|film − centre| ≤ 0.5`
+    // exactly, for coordinates below 2^22, where `x + 0.5` and the sum with an offset in
+    // `[−0.5, 0.5]` round within `[x, x + 1]`), so its weight is 1, as the loops would find.
+    let unit_splat =
+        splat && m == 0 && matches!(settings.filter, Filter::Box { radius } if radius >= 0.5) && w.max(h) <= 1 << 22;
     let work = || {
         tiles
             .par_iter()
@@ -184,7 +190,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                             &mut stats,
                             &mut packets,
                             &mut |film, sample| {
-                                if !splat {
+                                if !splat || unit_splat {
                                     acc[own].add(&sample, 1.0, aovs);
                                     return;
                                 }
@@ -409,7 +415,9 @@ mod tests {
     /// scene is one mesh) give exactly the image of each sample traced alone: one partial
     /// packet (5 samples), a full and a partial one (11), three with the last partial and
     /// the fourth idle (21), and 32 then a partial one (37), through a pinhole, a thin lens and
-    /// an orthographic camera.
+    /// an orthographic camera. Samples land by filter importance sampling (the default) and
+    /// are splatted through Mitsuba's one-pixel box (each sample weighs 1 in its own pixel
+    /// only); either way a pixel is the plain average of its own samples.
     #[test]
     fn camera_packets_render_what_single_rays_render() {
         for projection in [
@@ -418,15 +426,22 @@ mod tests {
             Projection::Orthographic { half_height: 1.2 },
         ] {
             for spp in [5, 11, 21, 37] {
-                packets_match_single_rays(
-                    Camera::look_at(Vec3::new(0.4, 0.3, 3.0), Vec3::ZERO, Vec3::Y, projection).unwrap(),
-                    spp,
-                );
+                for (reconstruction, filter) in [
+                    (Reconstruction::ImportanceSampled, Filter::default()),
+                    (Reconstruction::Splat, Filter::Box { radius: 0.5 }),
+                ] {
+                    packets_match_single_rays(
+                        Camera::look_at(Vec3::new(0.4, 0.3, 3.0), Vec3::ZERO, Vec3::Y, projection).unwrap(),
+                        spp,
+                        reconstruction,
+                        filter,
+                    );
+                }
             }
         }
     }
 
-    fn packets_match_single_rays(camera: Camera, spp: u32) {
+    fn packets_match_single_rays(camera: Camera, spp: u32, reconstruction: Reconstruction, filter: Filter) {
         let scene = Scene {
             geometries: vec![Geometry::Mesh(Mesh::icosphere(3))],
             objects: vec![Object { geometry: 0, transform: None, material: 0, emission: Rgb::ZERO, light_samples: 1 }],
@@ -441,7 +456,15 @@ mod tests {
             ambient: Rgb::ZERO,
             light_selection: LightSelection::Power,
         };
-        let settings = RenderSettings { width: 12, height: 10, spp, threads: 1, ..RenderSettings::default() };
+        let settings = RenderSettings {
+            width: 12,
+            height: 10,
+            spp,
+            threads: 1,
+            reconstruction,
+            filter,
+            ..RenderSettings::default()
+        };
         let integrator = Path { max_depth: 4, rr_depth: 2 };
         let world = AccelKind::DEFAULT.build_world(&scene, &AccelParams::default());
         crate::with_world!(&world, w => {
