@@ -5,7 +5,7 @@
 #   inside one process) on the bunny, the displaced icosphere and the dragon;
 # - building: `snell bench MESH --threads 1` and `--threads 2` as processes of their own,
 #   alternated ROUNDS times (a build of 10 ms, timed while another thread count's pool is alive
-#   in the same process, came out 20-50 % slower on two threads than alone: 12-15 against
+#   in the same process, came out 20-60 % slower on two threads than alone: 12-15 against
 #   9-10 ms on the bunny);
 # - rendering: `snell render SCENE --threads 1` then `--threads 2`, ROUNDS (default 3) times, on
 #   the Cornell box and the bunny and dragon under a constant environment, 256x256, 64 spp.
