@@ -36,8 +36,8 @@ for mesh in "$SCENES/stanford/bunny.ply" "$WORK/ico.ply" "$SCENES/stanford/drago
     : > "$tmp/build.json"
     for round in $(seq 1 "$ROUNDS"); do
         for threads in 1 2; do
-            "$bin" bench "$mesh" --threads "$threads" --reps "$REPS" --width 16 --height 16 --json |
-                head -n 1 >> "$tmp/build.json"
+            "$bin" bench "$mesh" --threads "$threads" --reps "$REPS" --width 16 --height 16 --json \
+                >> "$tmp/build.json"
         done
     done
     python3 - "$mesh" "$tmp/bench.json" "$tmp/build.json" "$ROUNDS" <<'PY'
@@ -48,7 +48,7 @@ print(f"== tracing {os.path.basename(sys.argv[1])}: 1 and 2 threads alternated, 
 for w in ["primary", "primary-packets", "bounce", "bounce-occluded"]:
     one, two = by[(1, w)]["mrays_per_s"], by[(2, w)]["mrays_per_s"]
     print(f"   {w:<16} {one:7.2f} -> {two:7.2f} Mrays/s: {two / one:.2f}x")
-builds = [json.loads(line) for line in open(sys.argv[3])]
+builds = [b for b in map(json.loads, open(sys.argv[3])) if b["workload"] == "primary"]
 one = statistics.median(b["build_ms"] for b in builds if b["threads"] == 1)
 two = statistics.median(b["build_ms"] for b in builds if b["threads"] == 2)
 print(f"   {'build':<16} {one:7.1f} -> {two:7.1f} ms:      {one / two:.2f}x   (separate processes, {sys.argv[4]} rounds)")
