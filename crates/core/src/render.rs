@@ -341,11 +341,11 @@ fn render_pixel<A: Accel, I: Integrator>(
             // The ray is read where it lies: a copy made here, just before it is read, would be
             // written in pieces and read whole (a store-forwarding stall).
             let (film, ray) = (film[k / 8][k % 8], &rays[k / 8][k % 8]);
-            let hit = hits[k / 8][k % 8].as_ref();
+            let hit = hits[k / 8][k % 8].as_ref().map(|h| world.interaction(ray, h));
             stats.camera += 1;
             let mut sample = Accum::default();
             if s.aovs {
-                if let Some(hit) = hit.map(|h| world.interaction(ray, h)) {
+                if let Some(hit) = &hit {
                     let o = &world.scene.objects[hit.object as usize];
                     sample.albedo = world.scene.materials[o.material].albedo(hit.uv);
                     sample.normal = if hit.ns.dot(ray.d) > 0.0 { -hit.ns } else { hit.ns };
@@ -478,10 +478,10 @@ mod tests {
                     for i in 0..settings.spp {
                         let (mut sampler, film, lens) = camera_film(w, &settings, &Strata::new(settings.spp), x, y, pixel, key, i);
                         let ray = w.scene.camera.ray(film, settings.width, settings.height, lens);
-                        let hit = w.hit(&ray, f32::INFINITY);
+                        let hit = w.intersect(&ray, f32::INFINITY);
                         lit += usize::from(hit.is_some());
                         let mut stats = RayStats::default();
-                        sum += integrator.radiance(w, &ray, hit.as_ref(), &mut sampler, &mut stats) * 1.0;
+                        sum += integrator.radiance(w, &ray, hit, &mut sampler, &mut stats) * 1.0;
                         n += 1.0;
                     }
                     // The renderer's arithmetic: Σ 1·L, added to an empty sum, over Σ 1.

@@ -9,7 +9,7 @@ pub use whitted::Whitted;
 use crate::accel::Accel;
 use crate::geometry::Ray;
 use crate::sampling::Sampler;
-use crate::scene::{RawHit, World};
+use crate::scene::{Intersection, World};
 use crate::Rgb;
 
 /// Counts of what the ray tree did, summed over the image.
@@ -44,15 +44,13 @@ impl RayStats {
 
 /// Computes the radiance arriving along a camera ray.
 pub trait Integrator: Sync {
-    /// `first` is the ray's closest hit, `world.hit(ray, f32::INFINITY)`, which the caller
-    /// has found already (camera rays are traced in packets). It comes by reference and
-    /// before shading: the integrator makes its [`Intersection`](crate::scene::Intersection)
-    /// ([`World::interaction`]) itself, where it is used.
+    /// `first` is the ray's closest hit, `world.intersect(ray, f32::INFINITY)`, which the
+    /// caller has found already (camera rays are traced in packets).
     fn radiance<A: Accel>(
         &self,
         world: &World<A>,
         ray: &Ray,
-        first: Option<&RawHit>,
+        first: Option<Intersection>,
         sampler: &mut Sampler,
         stats: &mut RayStats,
     ) -> Rgb;
@@ -70,7 +68,7 @@ impl Integrator for AnyIntegrator {
         &self,
         world: &World<A>,
         ray: &Ray,
-        first: Option<&RawHit>,
+        first: Option<Intersection>,
         sampler: &mut Sampler,
         stats: &mut RayStats,
     ) -> Rgb {

@@ -16,7 +16,7 @@ use crate::accel::Accel;
 use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
 use crate::material::Frame;
 use crate::sampling::Sampler;
-use crate::scene::{RawHit, World};
+use crate::scene::{Intersection, World};
 use crate::Rgb;
 use glam::{Vec3, Vec3A};
 
@@ -53,7 +53,7 @@ impl Integrator for Path {
         &self,
         world: &World<A>,
         camera_ray: &Ray,
-        first: Option<&RawHit>,
+        first: Option<Intersection>,
         rng: &mut Sampler,
         stats: &mut RayStats,
     ) -> Rgb {
@@ -72,9 +72,8 @@ impl Integrator for Path {
         let mut prev_p = camera_ray.o;
         let mut eta_scale = 1.0f32;
         let mut depth = 0u32;
-        // The camera ray's hit comes with it (made into an `Intersection` here, where it is
-        // used); each later one is found at the end of the loop.
-        let mut next = first.map(|h| world.interaction(camera_ray, h));
+        // The camera ray's hit comes with it; each later one is found at the end of the loop.
+        let mut next = first;
         loop {
             let Some(hit) = next else {
                 l += beta * Vec3A::from(scene.background);

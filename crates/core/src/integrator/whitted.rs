@@ -24,7 +24,7 @@ use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
 use crate::material::bsdf::Bsdf;
 use crate::material::{conductor_fresnel, fresnel, Frame, Material};
 use crate::sampling::{stratified_2d, Pcg32, Sampler};
-use crate::scene::{Intersection, RawHit, World};
+use crate::scene::{Intersection, World};
 use crate::Rgb;
 
 /// Whitted-style recursive ray tracing.
@@ -59,13 +59,12 @@ impl Integrator for Whitted {
         &self,
         world: &World<A>,
         ray: &Ray,
-        first: Option<&RawHit>,
+        first: Option<Intersection>,
         sampler: &mut Sampler,
         stats: &mut RayStats,
     ) -> Rgb {
         // The ray tree stratifies its shadow rays itself, from the independent stream.
         let mut ctx = Ctx { world, rng: sampler.rng(), stats };
-        let first = first.map(|h| world.interaction(ray, h));
         self.shade(&mut ctx, ray, first, 0, Rgb::ONE)
     }
 }
