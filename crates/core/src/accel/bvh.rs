@@ -330,7 +330,6 @@ pub(crate) fn has_avx2_fma() -> bool {
 /// Deepest tree traversal supports (the build clamps `max_depth` to it).
 const MAX_STACK: usize = 64;
 const BINS: usize = 16;
-const _: () = assert!(BINS.is_power_of_two(), "bin_indices masks with BINS - 1");
 
 /// The binary builder. It only reads shared data, so subtrees build in parallel.
 ///
@@ -567,9 +566,10 @@ const SMALL_BINS: usize = 8;
 /// leaves mostly costs a ray one more slot of a wide node it visits anyway, not a node visit
 /// of its own; and a block of four watertight triangle tests costs more than a wide node's
 /// slab test. At 0.8 nodes of five to eight references split into leaves of one block more
-/// often than at 1.0: in one run of `bench/vs_embree.sh`, bunny bounce rays 0.86× → 0.89× of
-/// Embree's, any-hit 0.92× → 0.95×, packets 1.11× → 1.14×; the icosphere's packets 1.16× →
-/// 1.21×; the dragon within ±1 %; 2–5 % more memory (still under 60 bytes per triangle).
+/// often than at 1.0: in one run of `bench/vs_embree.sh` (with [`SMALL_BINS`] as well), bunny
+/// bounce rays 0.85× → 0.89× of Embree's, any-hit 0.92× → 0.95×, packets 1.10× → 1.14×; the
+/// icosphere's packets 1.16× → 1.21×; the dragon within ±1 %; 5–7 % more memory (still under
+/// 60 bytes per triangle).
 const WIDE_SPLIT_COST: f32 = 0.8;
 
 /// Per axis, the SAH bins of `prims` (box and count) by their centres, for centre bounds
