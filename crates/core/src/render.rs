@@ -379,7 +379,10 @@ fn camera_film<A: Accel>(
     let (film_u, lens_u) = match s.sampler {
         SamplerKind::Independent => {
             let rng = sampler.rng();
-            let film = strata.sample(i, key, rng);
+            // The film's strata in order (sample `i` in cell `i`): no permutation to compute,
+            // and a packet's eight rays cross one row of cells, which keeps it coherent. The
+            // lens's strata are shuffled, so that film and lens cells are paired at random.
+            let film = strata.sample_in_order(i, key, rng);
             // Cameras without a lens ignore the lens sample: its draw only advances the stream
             // (by the one 2D draw a stratified sample makes), without stratifying it.
             let lens = if world.scene.camera.has_lens() {

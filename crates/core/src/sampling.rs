@@ -300,14 +300,29 @@ impl Strata {
     /// Sample `i` (of `n`): [`stratified_2d`]`(i, n, key, rng)`.
     #[inline]
     pub fn sample(&self, i: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
+        self.sample_with(i, key, rng, true)
+    }
+
+    /// [`Strata::sample`], but on a jittered grid sample `i` takes cell `i` (row by row)
+    /// rather than a cell chosen by `key`; a Latin hypercube still pairs its rows and columns
+    /// by `key`. The same strata and the same jitter. For samples whose other dimensions do
+    /// not depend on their index (the film position: each camera sample's random numbers are
+    /// hashed from it), the order costs nothing in quality, and it spares the permutation.
+    #[inline]
+    pub fn sample_in_order(&self, i: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
+        self.sample_with(i, key, rng, false)
+    }
+
+    #[inline(always)]
+    fn sample_with(&self, i: u32, key: u32, rng: &mut Pcg32, shuffle_grid: bool) -> Vec2 {
         let j = rng.next_2d();
         let (n, k) = (self.n, self.side);
-        let cell = permute_within(i, n, self.mask, key);
         let (x, y, d) = if k != 0 {
+            let cell = if shuffle_grid { permute_within(i, n, self.mask, key) } else { i };
             let (row, col) = div_rem(cell, k);
             (col as f32 + j.x, row as f32 + j.y, k as f32)
         } else {
-            (i as f32 + j.x, cell as f32 + j.y, n as f32)
+            (i as f32 + j.x, permute_within(i, n, self.mask, key) as f32 + j.y, n as f32)
         };
         // A multiply where it is exact (a power-of-two divisor: the usual sample counts), as
         // the division's latency sits on the path of every camera sample.
@@ -566,6 +581,38 @@ mod tests {
                 assert_eq!(cols, (0..n).collect::<Vec<_>>());
             }
             assert!(pts.iter().all(|p| p.x >= 0.0 && p.x < 1.0 && p.y >= 0.0 && p.y < 1.0));
+        }
+    }
+
+    /// Both orders fill every stratum once: each cell of a jittered grid (in order: sample `i`
+    /// in cell `i`, row by row), each row and column of a Latin hypercube (which the in-order
+    /// variant leaves as it was, the same points).
+    #[test]
+    fn strata_in_order_and_shuffled_fill_every_stratum() {
+        for (n, key) in [(16u32, 77u32), (64, 5), (10, 77), (12, 3)] {
+            let strata = Strata::new(n);
+            let side = (n as f32).sqrt() as u32;
+            let (mut a, mut b) = (Pcg32::new(1, 2), Pcg32::new(1, 2));
+            let shuffled: Vec<Vec2> = (0..n).map(|i| strata.sample(i, key, &mut a)).collect();
+            let in_order: Vec<Vec2> = (0..n).map(|i| strata.sample_in_order(i, key, &mut b)).collect();
+            for pts in [&shuffled, &in_order] {
+                assert!(pts.iter().all(|p| p.x >= 0.0 && p.x < 1.0 && p.y >= 0.0 && p.y < 1.0));
+            }
+            if side * side == n {
+                let cell = |p: &Vec2| (p.y * side as f32) as u32 * side + (p.x * side as f32) as u32;
+                let mut cells: Vec<u32> = shuffled.iter().map(cell).collect();
+                assert_ne!(cells, (0..n).collect::<Vec<_>>(), "n = {n}: the shuffled grid is in order");
+                cells.sort();
+                assert_eq!(cells, (0..n).collect::<Vec<_>>(), "n = {n}");
+                assert_eq!(in_order.iter().map(cell).collect::<Vec<_>>(), (0..n).collect::<Vec<_>>(), "n = {n}");
+            } else {
+                assert_eq!(shuffled, in_order, "n = {n}");
+                for axis in [0, 1] {
+                    let mut s: Vec<u32> = shuffled.iter().map(|p| (p[axis] * n as f32) as u32).collect();
+                    s.sort();
+                    assert_eq!(s, (0..n).collect::<Vec<_>>(), "n = {n}, axis {axis}");
+                }
+            }
         }
     }
 
