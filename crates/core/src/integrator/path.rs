@@ -91,7 +91,11 @@ impl Integrator for Path {
             // Unit already (to rounding): cameras normalize their rays, and each later segment
             // is a BSDF sample's unit direction taken out of its frame. Normalizing it again put a
             // square root and a division on the chain from one hit to the next (Cornell box 1 %).
-            debug_assert!((dir.length_squared() - 1.0).abs() < 1e-4, "segment direction {dir} is not unit");
+            // (A NaN direction passes: its sample comes out non-finite and is dropped.)
+            debug_assert!(
+                dir.is_nan() || (dir.length_squared() - 1.0).abs() < 1e-4,
+                "segment direction {dir} is not unit"
+            );
             let wo_world = -dir;
             let front = wo_world.dot(hit.ng) > 0.0;
             if front && obj.emission != Rgb::ZERO {
