@@ -431,13 +431,15 @@ impl TriData {
     }
 
     /// Closest triangle hit with `t < t_max` (updated): `(triangle, hit)`. `r4` is the ray
-    /// prepared for the triangle tests (shared by every untransformed object a ray meets).
+    /// prepared for the triangle tests, made from `ray` when the first leaf is reached if it
+    /// is not made yet (shared by every untransformed object a ray meets; a ray that reaches
+    /// no leaf, as most camera rays beside a mesh, never pays for it).
     #[inline(always)]
     fn closest<A: Accel>(
         &self,
         accel: &A,
         ray: &Ray,
-        r4: &Ray4,
+        r4: &mut Option<Ray4>,
         t_max: &mut f32,
         counter: &impl Counter,
     ) -> Option<(u32, TriHit)> {
@@ -445,7 +447,7 @@ impl TriData {
         match self {
             TriData::Leaves { blocks, ranges, labelled } => {
                 let mut leaf = |blocks: &[Tri4], tm: f32| {
-                    let found = closest_in_blocks(blocks, r4, tm, counter)?;
+                    let found = closest_in_blocks(blocks, shared_ray4(r4, ray), tm, counter)?;
                     rec = Some(found);
                     Some(found.1.t)
                 };
@@ -471,7 +473,7 @@ impl TriData {
                     |tri, tm| {
                         counter.prim();
                         let [a, b, c] = tris[tri as usize];
-                        intersect_triangle(&r4.ray, a, b, c, tm).map(|h| {
+                        intersect_triangle(&shared_ray4(r4, ray).ray, a, b, c, tm).map(|h| {
                             rec = Some((tri, h));
                             h.t
                         })
@@ -483,41 +485,45 @@ impl TriData {
         rec
     }
 
-    /// Whether any triangle is hit with `t < t_max`.
+    /// Whether any triangle is hit with `t < t_max`; `r4` as in [`TriData::closest`].
     #[inline(always)]
-    fn any<A: Accel>(&self, accel: &A, ray: &Ray, r4: &Ray4, t_max: f32) -> bool {
+    fn any<A: Accel>(&self, accel: &A, ray: &Ray, r4: &mut Option<Ray4>, t_max: f32) -> bool {
         match self {
             TriData::Leaves { blocks, ranges, labelled } => {
                 if let Some((a, b)) = TriData::one_range(ranges) {
-                    Tri4::any_in(&blocks[a as usize..b as usize], r4, t_max)
+                    Tri4::any_in(&blocks[a as usize..b as usize], shared_ray4(r4, ray), t_max)
                 } else {
                     accel.any_leaf_counted(
                         ray,
                         t_max,
-                        |l, tm| Tri4::any_in(TriData::leaf_blocks(blocks, ranges, *labelled, l), r4, tm),
+                        |l, tm| {
+                            Tri4::any_in(TriData::leaf_blocks(blocks, ranges, *labelled, l), shared_ray4(r4, ray), tm)
+                        },
                         &NoCount,
                     )
                 }
             }
             TriData::Single(tris) => accel.any(ray, t_max, |tri, tm| {
                 let [a, b, c] = tris[tri as usize];
-                intersect_triangle(&r4.ray, a, b, c, tm).is_some()
+                intersect_triangle(&shared_ray4(r4, ray).ray, a, b, c, tm).is_some()
             }),
         }
     }
 }
 
-/// Calls `f` with the ray in `o`'s space and the ray prepared for its triangle tests.
-/// Untransformed objects share one preparation per ray (`shared`, made when the first of them
-/// is met), lent by reference rather than copied.
+/// Calls `f` with the ray in `o`'s space and the slot of its preparation for the triangle
+/// tests ([`TriData::closest`] fills it when a leaf is reached). Untransformed objects share
+/// one preparation per ray (`shared`, made when the first of them needs it).
 #[inline(always)]
-fn with_mesh_ray<R>(o: &Object, ray: &Ray, shared: &mut Option<Ray4>, f: impl FnOnce(&Ray, &Ray4) -> R) -> R {
+fn with_mesh_ray<R>(
+    o: &Object,
+    ray: &Ray,
+    shared: &mut Option<Ray4>,
+    f: impl FnOnce(&Ray, &mut Option<Ray4>) -> R,
+) -> R {
     match &o.transform {
-        Some(x) => {
-            let local = x.ray_to_object(ray);
-            f(&local, &Ray4::new(WatertightRay::new(local.o, local.d)))
-        }
-        None => f(ray, shared_ray4(shared, ray)),
+        Some(x) => f(&x.ray_to_object(ray), &mut None),
+        None => f(ray, shared),
     }
 }
 
@@ -784,7 +790,7 @@ impl<'s, A: Accel> World<'s, A> {
             // One untransformed mesh: its tree is entered straight from here.
             counter.prim();
             let mut t = t_max;
-            let (prim, h) = tris.closest(accel, ray, &Ray4::new(WatertightRay::new(ray.o, ray.d)), &mut t, counter)?;
+            let (prim, h) = tris.closest(accel, ray, &mut None, &mut t, counter)?;
             return Some(RawHit { t, object: 0, prim, b1: h.b1, b2: h.b2 });
         }
         let mut test = |obj: u32, tmax: f32| {
@@ -966,7 +972,7 @@ impl<'s, A: Accel> World<'s, A> {
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         if let Some((accel, tris)) = self.one_tree() {
-            return tris.any(accel, ray, &Ray4::new(WatertightRay::new(ray.o, ray.d)), t_max);
+            return tris.any(accel, ray, &mut None, t_max);
         }
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
