@@ -244,8 +244,9 @@ fn closest_in_blocks(blocks: &[Tri4], r4: &Ray4, t_max: f32, counter: &impl Coun
     Tri4::closest_in(blocks, r4, t_max)
 }
 
-/// The ray prepared for the triangle tests of untransformed objects: made when the first of
-/// them is met, then shared by the rest.
+/// The ray prepared for the triangle tests, made in `shared` when a test first needs it and
+/// reused after: by every untransformed object a ray meets, and by every leaf of one object's
+/// tree (a transformed object's own slot holds its local ray's).
 #[inline(always)]
 fn shared_ray4<'a>(shared: &'a mut Option<Ray4>, ray: &Ray) -> &'a Ray4 {
     shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)))
