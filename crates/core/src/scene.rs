@@ -5,11 +5,11 @@ use glam::{Vec2, Vec3};
 
 use crate::accel::{Accel, BuildParams, Counter, NoCount};
 use crate::camera::Camera;
-use crate::geometry::{Aabb, Ray, Transform};
-use crate::light::{AreaLight, AreaShape, Light};
+use crate::geometry::{spawn_ray, spawn_ray_to, Aabb, Ray, Transform};
+use crate::light::{AreaLight, AreaShape, Light, LightSample};
 use crate::material::Material;
 use crate::sampling::build_cdf;
-use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Ray4, Sphere, Tri4, TriHit, WatertightRay};
+use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Ray4, Reentry, Sphere, Tri4, TriHit, WatertightRay};
 use crate::Rgb;
 
 /// Shared geometry: an object refers to it by index, so many objects (instances) can share
@@ -216,6 +216,30 @@ pub struct RawHit {
     pub prim: u32,
     pub b1: f32,
     pub b2: f32,
+}
+
+/// Objects a query passes over (up to two): those its ray starts or ends on and cannot meet
+/// anywhere else, as [`World::leaving`] finds them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Skip([u32; 2]);
+
+/// No object (in [`Skip`]).
+const NO_OBJECT: u32 = u32::MAX;
+
+impl Skip {
+    /// Passes over nothing.
+    pub const NONE: Skip = Skip([NO_OBJECT; 2]);
+
+    /// Passes over what `self` and `other` pass over (the first object of each).
+    #[inline]
+    pub fn and(self, other: Skip) -> Skip {
+        Skip([self.0[0], other.0[0]])
+    }
+
+    #[inline(always)]
+    fn has(self, obj: u32) -> bool {
+        obj == self.0[0] || obj == self.0[1]
+    }
 }
 
 /// A surface hit with everything shading needs, in world space.
@@ -579,6 +603,8 @@ pub struct World<'s, A: Accel> {
     /// tested as one range of blocks: the top level's leaf test goes straight to them.
     /// `NOT_DIRECT` in the first field otherwise.
     object_blocks: Vec<(u32, u32, u32)>,
+    /// Per object, whether a ray leaving its surface can meet it again (see [`World::leaving`]).
+    reentry: Vec<Reentry>,
     /// Whether the top level's leaf references are the objects themselves
     /// ([`Accel::relabel_leaves`]; every leaf holds one object), so that its leaf-level query
     /// hands the object straight to the test.
@@ -646,6 +672,19 @@ impl<'s, A: Accel> World<'s, A> {
                 _ => (NOT_DIRECT, 0, 0),
             })
             .collect();
+        // Worked out in world space: a mesh's as it stands (meshes under a transform are left
+        // `Possible`), a sphere's about its placed centre (an ellipsoid is as convex).
+        let reentry = scene
+            .objects
+            .iter()
+            .map(|o| match (&scene.geometries[o.geometry], &o.transform) {
+                (Geometry::Mesh(m), None) => m.reentry(),
+                (Geometry::Mesh(_), Some(_)) => Reentry::Possible,
+                (Geometry::Sphere(s), x) => {
+                    Reentry::Inward { centre: x.as_ref().map_or(s.center, |x| x.point(s.center)) }
+                }
+            })
+            .collect();
         let mut lights = scene.lights.clone();
         let mut object_light = vec![u32::MAX; scene.objects.len()];
         for (i, o) in scene.objects.iter().enumerate() {
@@ -676,6 +715,7 @@ impl<'s, A: Accel> World<'s, A> {
             tris,
             face_normals,
             object_blocks,
+            reentry,
             top_by_object,
             lights,
             light_cdf,
@@ -721,6 +761,46 @@ impl<'s, A: Accel> World<'s, A> {
         } else {
             0.0
         }
+    }
+
+    /// What a query for a ray from `p`, a point on object `obj`'s surface whose geometric normal
+    /// is `ng` (either way round), along `d` may pass over: the object itself where the ray
+    /// cannot meet it again (a flat object, or a convex one left outwards; see [`Reentry`]).
+    /// The same holds backwards, for a shadow ray's end on a light: `p` that end, `d` pointing
+    /// back along the ray. A query passing over such an object finds what it would find
+    /// testing it, without the test (rays off the walls of a room no longer pay for their own
+    /// wall), but for rounding: a shadow ray that grazes a sphere light's outline on its way to
+    /// a point the light's sampling chose as visible could be found blocked by the light
+    /// itself, and no longer is.
+    #[inline]
+    pub fn leaving(&self, obj: u32, p: Vec3, ng: Vec3, d: Vec3) -> Skip {
+        let clear = match self.reentry[obj as usize] {
+            Reentry::Never => true,
+            Reentry::Inward { centre } => ng.dot(d) * ng.dot(p - centre) > 0.0,
+            Reentry::Possible => false,
+        };
+        Skip([if clear { obj } else { NO_OBJECT }, NO_OBJECT])
+    }
+
+    /// Whether light sample `ls` of light `light` is blocked from the surface point `hit`,
+    /// whose geometric normal is `ng` (either way round). The shadow ray leaves `hit` offset to
+    /// the light's side and ends short of the light's point, offset to `hit`'s side (or runs to
+    /// infinity); it passes over the surface it leaves and the light it ends on where it cannot
+    /// meet them ([`World::leaving`]).
+    #[inline(always)]
+    pub fn shadowed(&self, hit: &Intersection, ng: Vec3, light: usize, ls: &LightSample) -> bool {
+        let wi = Vec3::from(ls.wi);
+        if ls.infinite {
+            let r = spawn_ray(hit.p, ng, wi);
+            return self.occluded_skipping(&r, f32::INFINITY, self.leaving(hit.object, hit.p, ng, r.d));
+        }
+        let (q, nq) = (Vec3::from(ls.p), Vec3::from(ls.n));
+        let (r, t_max) = spawn_ray_to(hit.p, ng, q, nq);
+        let mut skip = self.leaving(hit.object, hit.p, ng, r.d);
+        if let Light::Area(a) = &self.lights[light] {
+            skip = skip.and(self.leaving(a.object, q, nq, -r.d));
+        }
+        self.occluded_skipping(&r, t_max, skip)
     }
 
     /// The area light of an object, if it emits.
@@ -769,7 +849,12 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// Closest hit with `0 < t < t_max`, with everything shading needs.
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Intersection> {
-        self.hit(ray, t_max).map(|h| self.interaction(ray, &h))
+        self.intersect_skipping(ray, t_max, Skip::NONE)
+    }
+
+    /// [`World::intersect`] passing over the objects of `skip`, which the ray cannot meet.
+    pub fn intersect_skipping(&self, ray: &Ray, t_max: f32, skip: Skip) -> Option<Intersection> {
+        self.hit_skipping(ray, t_max, skip, &NoCount).map(|h| self.interaction(ray, &h))
     }
 
     /// Closest hit with `0 < t < t_max`: only which primitive and where on it.
@@ -780,6 +865,11 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// [`World::hit`], reporting the nodes visited and primitives tested at both levels.
     pub fn hit_counted(&self, ray: &Ray, t_max: f32, counter: &impl Counter) -> Option<RawHit> {
+        self.hit_skipping(ray, t_max, Skip::NONE, counter)
+    }
+
+    /// [`World::hit_counted`] passing over the objects of `skip`.
+    fn hit_skipping(&self, ray: &Ray, t_max: f32, skip: Skip, counter: &impl Counter) -> Option<RawHit> {
         // (object and primitive as one word, b1, b2). The object test below writes it and the
         // end of this function reads it back: kept as one word, its store and its load have the
         // same width, so the load is forwarded from the store (two 4-byte stores read as one
@@ -795,6 +885,9 @@ impl<'s, A: Accel> World<'s, A> {
             return Some(RawHit { t, object: 0, prim, b1: h.b1, b2: h.b2 });
         }
         let mut test = |obj: u32, tmax: f32| {
+            if skip.has(obj) {
+                return None;
+            }
             counter.prim();
             let (prim, h) = self.closest_in_object(obj, ray, &mut shared, tmax, counter)?;
             best = Some((obj as u64 | (prim as u64) << 32, h.b1, h.b2));
@@ -972,11 +1065,19 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        self.occluded_skipping(ray, t_max, Skip::NONE)
+    }
+
+    /// [`World::occluded`] passing over the objects of `skip`, which the ray cannot meet.
+    pub fn occluded_skipping(&self, ray: &Ray, t_max: f32, skip: Skip) -> bool {
         if let Some((accel, tris)) = self.one_tree() {
             return tris.any(accel, ray, &mut None, t_max);
         }
         let mut shared = None;
         let mut test = |obj: u32, tmax: f32| {
+            if skip.has(obj) {
+                return false;
+            }
             if let Some(blocks) = self.direct_blocks(obj) {
                 return Tri4::any_in(blocks, shared_ray4(&mut shared, ray), tmax);
             }
@@ -1132,5 +1233,97 @@ mod tests {
         let mut tri = quad(Vec3::ZERO, Vec3::X, Vec3::Y);
         tri.indices.truncate(1);
         assert!(matches!(shape(tri, None), AreaShape::Triangles { .. }));
+    }
+
+    /// `World::leaving` passes over only objects a ray cannot meet. From real hits on flat,
+    /// convex and other meshes and on spheres (one stretched into an ellipsoid), rays leaving
+    /// to either side find the same closest hit, and the same occlusion, with the skip as
+    /// without; and the skip is taken for every ray off a flat object, for some off a convex
+    /// one (those leaving outwards), and never off the others.
+    #[test]
+    fn rays_leaving_a_surface_pass_over_only_what_they_cannot_meet() {
+        let mut geometries = Vec::new();
+        let mut expect = Vec::new();
+        for (k, (name, mut m, want)) in crate::shape::mesh::tests::reentry_shapes().into_iter().enumerate() {
+            if m.indices.is_empty() {
+                continue;
+            }
+            // Side by side (in place: the objects stay untransformed).
+            let shift = Vec3::new(6.0 * k as f32, 0.0, 0.0);
+            m.positions.iter_mut().for_each(|p| *p += shift);
+            geometries.push(Geometry::Mesh(m));
+            expect.push((name, want, None));
+        }
+        geometries.push(Geometry::Sphere(Sphere { center: Vec3::new(-6.0, 0.5, 0.0), radius: 0.8 }));
+        expect.push(("sphere", Some(false), None));
+        geometries.push(Geometry::Sphere(Sphere { center: Vec3::ZERO, radius: 1.0 }));
+        let stretch = glam::Affine3A::from_translation(Vec3::new(-12.0, 0.0, 1.0))
+            * glam::Affine3A::from_scale(Vec3::new(2.0, 0.5, 1.0));
+        expect.push(("ellipsoid", Some(false), Transform::try_new(stretch)));
+        let objects = expect
+            .iter()
+            .enumerate()
+            .map(|(g, e)| Object { geometry: g, transform: e.2, material: 0, emission: Rgb::ZERO, light_samples: 1 })
+            .collect();
+        let camera = crate::camera::Camera::look_at(
+            Vec3::Z,
+            Vec3::ZERO,
+            Vec3::Y,
+            crate::camera::Projection::Perspective { fov_y: 40.0 },
+        )
+        .unwrap();
+        let scene = Scene {
+            geometries,
+            objects,
+            materials: vec![Material::Diffuse { albedo: crate::material::Texture::Constant(Rgb::ONE) }],
+            lights: Vec::new(),
+            camera,
+            background: Rgb::ZERO,
+            ambient: Rgb::ZERO,
+            light_selection: LightSelection::Power,
+        };
+        // Every accelerator: the skip is taken in the world's own object test.
+        for kind in crate::accel::AccelKind::ALL {
+            let any = kind.build_world(&scene, &crate::accel::AccelParams::default());
+            crate::with_world!(&any, world => {
+                let mut rng = crate::sampling::Pcg32::new(7, 11);
+                let unit = |rng: &mut crate::sampling::Pcg32| loop {
+                    let v = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
+                    if (1e-3..1.0).contains(&v.length_squared()) {
+                        break v.normalize();
+                    }
+                };
+                // Per object: rays left from it, and how many of them passed over it.
+                let mut counts = vec![(0u32, 0u32); expect.len()];
+                for (i, o) in scene.objects.iter().enumerate() {
+                    let b = o.place_aabb(scene.geometries[o.geometry].aabb());
+                    for _ in 0..400 {
+                        let target = b.min + (b.max - b.min) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                        let from = target + unit(&mut rng) * 5.0;
+                        let Some(hit) = world.intersect(&Ray::new(from, target - from), f32::INFINITY) else { continue };
+                        for _ in 0..4 {
+                            let ray = crate::geometry::spawn_ray(hit.p, hit.ng, unit(&mut rng));
+                            let skip = world.leaving(hit.object, hit.p, hit.ng, ray.d);
+                            let c = &mut counts[hit.object as usize];
+                            c.0 += 1;
+                            c.1 += u32::from(skip != Skip::NONE);
+                            let (want, got) = (world.hit(&ray, f32::INFINITY), world.hit_skipping(&ray, f32::INFINITY, skip, &NoCount));
+                            assert_eq!(got, want, "object {i} ({}): ray {ray:?} from a hit on {}", expect[i].0, hit.object);
+                            assert_eq!(world.occluded_skipping(&ray, f32::INFINITY, skip), want.is_some());
+                        }
+                    }
+                }
+                for ((name, want, _), &(rays, skipped)) in expect.iter().zip(&counts) {
+                    assert!(rays >= 200, "{kind:?}, {name}: only {rays} rays");
+                    match want {
+                        Some(true) => assert_eq!(skipped, rays, "{kind:?}, {name}: flat"),
+                        Some(false) => {
+                            assert!(skipped > rays / 5 && skipped < rays, "{kind:?}, {name}: {skipped} of {rays} passed over")
+                        }
+                        None => assert_eq!(skipped, 0, "{kind:?}, {name}"),
+                    }
+                }
+            });
+        }
     }
 }

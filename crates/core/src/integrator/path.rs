@@ -13,7 +13,7 @@
 
 use super::{Integrator, RayStats};
 use crate::accel::Accel;
-use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
+use crate::geometry::{spawn_ray, Ray};
 use crate::material::Frame;
 use crate::sampling::Sampler;
 use crate::scene::{Intersection, World};
@@ -141,12 +141,7 @@ impl Integrator for Path {
                         let f = if same_side == (wi.z * wo.z > 0.0) { bsdf.eval(wo, wi) } else { Rgb::ZERO };
                         if f.max_element() > 0.0 && ls.value.max_element() > 0.0 {
                             stats.shadow += 1;
-                            let blocked = if ls.infinite {
-                                world.occluded(&spawn_ray(hit.p, ng, ls_wi), f32::INFINITY)
-                            } else {
-                                let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p.into(), ls.n.into());
-                                world.occluded(&r, t_max)
-                            };
+                            let blocked = world.shadowed(&hit, ng, li, &ls);
                             if !blocked {
                                 let w = if ls.pdf > 0.0 {
                                     power_heuristic(ls.pdf * p_choose, bsdf.pdf(wo, wi))
@@ -194,7 +189,7 @@ impl Integrator for Path {
             if beta.max_element() <= 0.0 || !beta.is_finite() {
                 break;
             }
-            next = world.intersect(&ray, f32::INFINITY);
+            next = world.intersect_skipping(&ray, f32::INFINITY, world.leaving(hit.object, hit.p, ng, ray.d));
         }
         l.into()
     }

@@ -20,11 +20,11 @@ use glam::Vec3;
 
 use super::{Integrator, RayStats};
 use crate::accel::Accel;
-use crate::geometry::{spawn_ray, spawn_ray_to, Ray};
+use crate::geometry::{spawn_ray, Ray};
 use crate::material::bsdf::Bsdf;
 use crate::material::{conductor_fresnel, fresnel, Frame, Material};
 use crate::sampling::{stratified_2d, Pcg32, Sampler};
-use crate::scene::{Intersection, World};
+use crate::scene::{Intersection, Skip, World};
 use crate::Rgb;
 
 /// Whitted-style recursive ray tracing.
@@ -70,8 +70,9 @@ impl Integrator for Whitted {
 }
 
 impl Whitted {
-    fn trace<A: Accel>(&self, cx: &mut Ctx<A>, ray: &Ray, depth: u32, throughput: Rgb) -> Rgb {
-        let hit = cx.world.intersect(ray, f32::INFINITY);
+    /// The radiance along `ray`, which passes over the objects of `skip`.
+    fn trace<A: Accel>(&self, cx: &mut Ctx<A>, ray: &Ray, skip: Skip, depth: u32, throughput: Rgb) -> Rgb {
+        let hit = cx.world.intersect_skipping(ray, f32::INFINITY, skip);
         self.shade(cx, ray, hit, depth, throughput)
     }
 
@@ -208,7 +209,8 @@ impl Whitted {
             Kind::Reflection => cx.stats.reflection += 1,
             Kind::Refraction => cx.stats.refraction += 1,
         }
-        weight * self.trace(cx, &spawn_ray(hit.p, ng, dir), depth + 1, tp)
+        let ray = spawn_ray(hit.p, ng, dir);
+        weight * self.trace(cx, &ray, cx.world.leaving(hit.object, hit.p, ng, ray.d), depth + 1, tp)
     }
 
     /// Direct light from every light source, with shadow rays.
@@ -237,12 +239,7 @@ impl Whitted {
                     continue;
                 }
                 cx.stats.shadow += 1;
-                let blocked = if ls.infinite {
-                    cx.world.occluded(&spawn_ray(hit.p, ng, ls_wi), f32::INFINITY)
-                } else {
-                    let (r, t_max) = spawn_ray_to(hit.p, ng, ls.p.into(), ls.n.into());
-                    cx.world.occluded(&r, t_max)
-                };
+                let blocked = cx.world.shadowed(hit, ng, li, &ls);
                 if !blocked {
                     acc += f * Vec3::from(ls.value);
                 }

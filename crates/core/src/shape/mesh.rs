@@ -14,6 +14,24 @@ pub struct Mesh {
     pub indices: Vec<[u32; 3]>,
 }
 
+/// Whether a ray that leaves a surface can meet the same surface again, as a query may use to
+/// pass over the surface it starts from (or the light it ends on) without testing it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Reentry {
+    /// Flat: every vertex in one plane (to the rounding of its coordinates). A ray leaving the
+    /// surface, to either side, never meets it again.
+    Never,
+    /// Convex: every vertex on `centre`'s side of every triangle's plane (or, for a sphere, its
+    /// centre). A ray leaving the surface to the side away from `centre` never meets it again.
+    Inward { centre: Vec3 },
+    /// A ray leaving the surface may meet it again (or the mesh was too large to check).
+    Possible,
+}
+
+/// [`Mesh::reentry`] checks meshes of up to this many pairs of a triangle and a triangle
+/// corner (about 1,200 triangles); it is meant for the small objects of rooms and boxes.
+pub const REENTRY_MAX_CHECKS: usize = 1 << 22;
+
 /// Why a mesh is invalid.
 #[derive(Clone, Debug, PartialEq)]
 pub enum MeshError {
@@ -90,6 +108,68 @@ impl Mesh {
     pub fn aabb(&self) -> Aabb {
         // Only vertices that triangles use.
         self.indices.iter().flatten().fold(Aabb::EMPTY, |b, &i| b.grow(self.positions[i as usize]))
+    }
+
+    /// Whether a ray leaving this mesh's surface can meet the mesh again (see [`Reentry`]).
+    /// Worked out for meshes of up to [`REENTRY_MAX_CHECKS`] triangle-vertex pairs (the check
+    /// sets each triangle's plane against every vertex); larger ones are `Possible`.
+    pub fn reentry(&self) -> Reentry {
+        let corners = || self.indices.iter().flatten().map(|&i| self.positions[i as usize].as_dvec3());
+        let n = self.indices.len() * 3;
+        if n == 0 || self.indices.len() * n > REENTRY_MAX_CHECKS {
+            return Reentry::Possible;
+        }
+        let b = self.aabb();
+        let diag = f64::from(b.extent().length());
+        let far = f64::from(b.min.abs().max(b.max.abs()).max_element());
+        // How far off a plane a vertex may lie and still count as on it: the rounding of
+        // coordinates (a flat quad's corners, stored as floats, are not exactly coplanar).
+        let eps = f64::from(f32::EPSILON);
+        let tol = 1e-6 * diag + 4.0 * eps * far;
+        let normals: Vec<(glam::DVec3, glam::DVec3)> = self
+            .indices
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.positions[i as usize].as_dvec3());
+                (a, (b - a).cross(c - a))
+            })
+            .collect();
+        let Some(&(a, widest)) = normals.iter().max_by(|x, y| x.1.length_squared().total_cmp(&y.1.length_squared()))
+        else {
+            return Reentry::Possible;
+        };
+        if widest.length() <= 1e-12 * diag * diag {
+            return Reentry::Possible;
+        }
+        let plane = widest.normalize();
+        if corners().all(|v| plane.dot(v - a).abs() <= tol) {
+            return Reentry::Never;
+        }
+        // Convex: every vertex on the centre's side of every triangle's plane, the centre
+        // clearly inside (so that the side a hit point's normal gives is not lost to rounding).
+        let centre = corners().sum::<glam::DVec3>() / n as f64;
+        let margin = 1e-4 * diag + 64.0 * eps * far;
+        let convex = normals.iter().all(|&(a, cross)| {
+            let len = cross.length();
+            if len <= 1e-12 * diag * diag {
+                return false;
+            }
+            // Oriented away from the centre.
+            let mut out = cross / len;
+            let depth = out.dot(centre - a);
+            if depth.abs() < margin {
+                return false;
+            }
+            if depth > 0.0 {
+                out = -out;
+            }
+            corners().all(|v| out.dot(v - a) <= tol)
+        });
+        if convex {
+            Reentry::Inward { centre: centre.as_vec3() }
+        } else {
+            Reentry::Possible
+        }
     }
 
     pub fn triangle_area(&self, i: usize) -> f32 {
@@ -188,7 +268,7 @@ impl Mesh {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -215,6 +295,71 @@ mod tests {
             }
         }
         assert!(edges.values().all(|&n| n == 2));
+    }
+
+    /// Meshes of several triangles, joined from parts.
+    pub(crate) fn joined(parts: &[Mesh]) -> Mesh {
+        let mut m = Mesh::default();
+        for p in parts {
+            let base = m.positions.len() as u32;
+            m.positions.extend(&p.positions);
+            m.indices.extend(p.indices.iter().map(|t| t.map(|i| i + base)));
+        }
+        m
+    }
+
+    /// Shapes `Mesh::reentry` must tell apart, as they leave it: flat (whatever its place,
+    /// its corners rounded to floats off the plane), convex (closed or not: a box without
+    /// its lid, a sheet folded once), and neither (a step, two boxes apart, a degenerate
+    /// triangle, an empty mesh).
+    pub(crate) fn reentry_shapes() -> Vec<(&'static str, Mesh, Option<bool>)> {
+        let mut lidless = Mesh::cuboid(Vec3::ZERO, Vec3::ONE);
+        lidless.indices.retain(|t| !t.iter().all(|&i| i & 2 != 0)); // no triangle at y = 1
+        let mut folded = Mesh::quad(Vec3::ZERO, Vec3::X * 4.0, Vec3::Z * 4.0);
+        folded.positions[2].y = 0.3;
+        let step = joined(&[
+            Mesh::quad(Vec3::ZERO, Vec3::X, Vec3::Z),
+            Mesh::quad(Vec3::X, Vec3::Y, Vec3::Z),
+            Mesh::quad(Vec3::new(1.0, 1.0, 0.0), Vec3::X, Vec3::Z),
+        ]);
+        let two_boxes =
+            joined(&[Mesh::cuboid(Vec3::ZERO, Vec3::ONE), Mesh::cuboid(Vec3::splat(3.0), Vec3::splat(4.0))]);
+        let mut sliver = Mesh::cuboid(Vec3::ZERO, Vec3::ONE);
+        sliver.indices.push([0, 1, 1]);
+        // (name, mesh, Some(flat) where a ray leaving it (outwards, if convex) runs clear).
+        vec![
+            (
+                "tilted quad far out",
+                Mesh::quad(Vec3::new(1000.3, -200.7, 55.1), Vec3::new(3.1, 0.2, -1.7), Vec3::new(0.4, 2.9, 1.1)),
+                Some(true),
+            ),
+            ("quad", Mesh::quad(Vec3::ZERO, Vec3::X, Vec3::Y), Some(true)),
+            ("cuboid", Mesh::cuboid(Vec3::new(-1.0, 2.0, 0.5), Vec3::new(3.0, 2.5, 4.0)), Some(false)),
+            ("icosphere", Mesh::icosphere(2), Some(false)),
+            ("box without its lid", lidless, Some(false)),
+            ("folded sheet", folded, Some(false)),
+            ("step", step, None),
+            ("two boxes", two_boxes, None),
+            ("degenerate triangle", sliver, None),
+            ("empty", Mesh::default(), None),
+        ]
+    }
+
+    #[test]
+    fn reentry_tells_flat_convex_and_other_meshes_apart() {
+        for (name, m, want) in reentry_shapes() {
+            let got = m.reentry();
+            match (want, got) {
+                (Some(true), Reentry::Never) | (None, Reentry::Possible) => {}
+                (Some(false), Reentry::Inward { centre }) => {
+                    // Inside every triangle's plane, as the vertices are.
+                    assert!(m.aabb().contains(centre), "{name}: centre {centre} outside the box");
+                }
+                _ => panic!("{name}: {got:?}, expected {want:?}"),
+            }
+        }
+        // Too large to check: left possible.
+        assert_eq!(Mesh::icosphere(6).reentry(), Reentry::Possible);
     }
 
     #[test]

@@ -1,11 +1,11 @@
 //! Surfaces: triangle meshes (watertight ray/triangle test), spheres.
 
-mod mesh;
+pub(crate) mod mesh;
 mod sphere;
 mod tri4;
 mod triangle;
 
-pub use mesh::{Mesh, MeshError};
+pub use mesh::{Mesh, MeshError, Reentry, REENTRY_MAX_CHECKS};
 pub use sphere::{intersect_sphere, Sphere};
 #[cfg(target_arch = "x86_64")]
 pub use tri4::Rays8;
