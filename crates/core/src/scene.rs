@@ -614,6 +614,9 @@ pub struct World<'s, A: Accel> {
     light_cdf: Vec<f32>,
     /// Per object, the index of its area light in `lights` (`u32::MAX`: not emissive).
     object_light: Vec<u32>,
+    /// Per light, the object a shadow ray ending on it may pass over (`NO_OBJECT` where that
+    /// cannot pay: a point light, or an object whose `reentry` is `Possible`).
+    light_object: Vec<u32>,
     /// The index of the environment light in `lights`, if there is one.
     environment: Option<usize>,
     /// Whether this CPU has AVX2, for the packets' eight-ray triangle test.
@@ -673,18 +676,22 @@ impl<'s, A: Accel> World<'s, A> {
             })
             .collect();
         // Worked out in world space: a mesh's as it stands (meshes under a transform are left
-        // `Possible`), a sphere's about its placed centre (an ellipsoid is as convex).
+        // `Possible`), a sphere's about its placed centre (an ellipsoid is as convex). Where
+        // every triangle lies on a face of the mesh's box (the walls of an axis-aligned room, an
+        // axis-aligned box) the box test already turns away every ray leaving outwards, so
+        // that passing over the mesh would cost without saving: it is left `Possible` too.
         let reentry = scene
             .objects
             .iter()
             .map(|o| match (&scene.geometries[o.geometry], &o.transform) {
+                (Geometry::Mesh(m), None) if m.on_box_faces() => Reentry::Possible,
                 (Geometry::Mesh(m), None) => m.reentry(),
                 (Geometry::Mesh(_), Some(_)) => Reentry::Possible,
                 (Geometry::Sphere(s), x) => {
                     Reentry::Inward { centre: x.as_ref().map_or(s.center, |x| x.point(s.center)) }
                 }
             })
-            .collect();
+            .collect::<Vec<_>>();
         let mut lights = scene.lights.clone();
         let mut object_light = vec![u32::MAX; scene.objects.len()];
         for (i, o) in scene.objects.iter().enumerate() {
@@ -706,6 +713,13 @@ impl<'s, A: Accel> World<'s, A> {
                 0.0
             }
         }));
+        let light_object = lights
+            .iter()
+            .map(|l| match l {
+                Light::Area(a) if reentry[a.object as usize] != Reentry::Possible => a.object,
+                _ => NO_OBJECT,
+            })
+            .collect();
         let environment = lights.iter().position(|l| matches!(l, Light::Environment(_)));
         let avx2 = crate::accel::has_avx2_fma();
         let mut world = World {
@@ -720,6 +734,7 @@ impl<'s, A: Accel> World<'s, A> {
             lights,
             light_cdf,
             object_light,
+            light_object,
             environment,
             avx2,
             packets: false,
@@ -797,8 +812,9 @@ impl<'s, A: Accel> World<'s, A> {
         let (q, nq) = (Vec3::from(ls.p), Vec3::from(ls.n));
         let (r, t_max) = spawn_ray_to(hit.p, ng, q, nq);
         let mut skip = self.leaving(hit.object, hit.p, ng, r.d);
-        if let Light::Area(a) = &self.lights[light] {
-            skip = skip.and(self.leaving(a.object, q, nq, -r.d));
+        let at = self.light_object[light];
+        if at != NO_OBJECT {
+            skip = skip.and(self.leaving(at, q, nq, -r.d));
         }
         self.occluded_skipping(&r, t_max, skip)
     }
@@ -1251,6 +1267,9 @@ mod tests {
             // Side by side (in place: the objects stay untransformed).
             let shift = Vec3::new(6.0 * k as f32, 0.0, 0.0);
             m.positions.iter_mut().for_each(|p| *p += shift);
+            // A mesh on its box's faces is never passed over: its box test turns away the
+            // rays leaving it outwards already.
+            let want = if m.on_box_faces() { None } else { want };
             geometries.push(Geometry::Mesh(m));
             expect.push((name, want, None));
         }

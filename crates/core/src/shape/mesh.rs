@@ -172,6 +172,19 @@ impl Mesh {
         }
     }
 
+    /// Whether every triangle lies in a face plane of the mesh's box: its three corners share
+    /// the box's lowest or highest coordinate on some axis, exactly.
+    pub fn on_box_faces(&self) -> bool {
+        let b = self.aabb();
+        self.indices.iter().all(|t| {
+            let [p, q, r] = t.map(|i| self.positions[i as usize]);
+            (0..3).any(|a| {
+                let c = p[a];
+                (c == b.min[a] || c == b.max[a]) && q[a] == c && r[a] == c
+            })
+        })
+    }
+
     pub fn triangle_area(&self, i: usize) -> f32 {
         let [a, b, c] = self.triangle(i);
         0.5 * (b - a).cross(c - a).length()
@@ -358,6 +371,10 @@ pub(crate) mod tests {
                 _ => panic!("{name}: {got:?}, expected {want:?}"),
             }
         }
+        // Triangles on their box's faces: an axis-aligned quad or box, not a tilted one.
+        let shapes = reentry_shapes();
+        let on_faces: Vec<&str> = shapes.iter().filter(|s| s.1.on_box_faces()).map(|s| s.0).collect();
+        assert_eq!(on_faces, ["quad", "cuboid", "box without its lid", "degenerate triangle", "empty"]);
         // Too large to check: left possible.
         assert_eq!(Mesh::icosphere(6).reentry(), Reentry::Possible);
     }
