@@ -684,8 +684,12 @@ impl<'s, A: Accel> World<'s, A> {
             .objects
             .iter()
             .map(|o| match (&scene.geometries[o.geometry], &o.transform) {
-                (Geometry::Mesh(m), None) if m.on_box_faces() => Reentry::Possible,
-                (Geometry::Mesh(m), None) => m.reentry(),
+                (Geometry::Mesh(m), None) => match m.reentry() {
+                    // (Large meshes are `Possible` at once, without a pass over them.)
+                    Reentry::Possible => Reentry::Possible,
+                    _ if m.on_box_faces() => Reentry::Possible,
+                    r => r,
+                },
                 (Geometry::Mesh(_), Some(_)) => Reentry::Possible,
                 (Geometry::Sphere(s), x) => {
                     Reentry::Inward { centre: x.as_ref().map_or(s.center, |x| x.point(s.center)) }
