@@ -1199,6 +1199,28 @@ mod tests {
         m
     }
 
+    /// A scene of these geometries, objects and materials, with no other lights, seen by a
+    /// camera at `+z` looking at the origin.
+    fn scene_of(geometries: Vec<Geometry>, objects: Vec<Object>, materials: Vec<Material>) -> Scene {
+        let camera = crate::camera::Camera::look_at(
+            Vec3::Z,
+            Vec3::ZERO,
+            Vec3::Y,
+            crate::camera::Projection::Perspective { fov_y: 40.0 },
+        )
+        .unwrap();
+        Scene {
+            geometries,
+            objects,
+            materials,
+            lights: Vec::new(),
+            camera,
+            background: Rgb::ZERO,
+            ambient: Rgb::ZERO,
+            light_selection: LightSelection::Power,
+        }
+    }
+
     #[test]
     fn leaf_labels_give_back_their_block_ranges() {
         for (a, b) in [(0, 1), (0, 8), (5, 6), (123_456, 123_463), ((1 << 27) - 9, (1 << 27) - 1)] {
@@ -1215,23 +1237,7 @@ mod tests {
     #[test]
     fn emitting_rectangles_are_sampled_as_rectangles() {
         let shape = |m: Mesh, transform: Option<Transform>| {
-            let camera = crate::camera::Camera::look_at(
-                Vec3::Z,
-                Vec3::ZERO,
-                Vec3::Y,
-                crate::camera::Projection::Perspective { fov_y: 40.0 },
-            )
-            .unwrap();
-            let scene = Scene {
-                geometries: vec![Geometry::Mesh(m)],
-                objects: Vec::new(),
-                materials: Vec::new(),
-                lights: Vec::new(),
-                camera,
-                background: Rgb::ZERO,
-                ambient: Rgb::ZERO,
-                light_selection: LightSelection::Power,
-            };
+            let scene = scene_of(vec![Geometry::Mesh(m)], Vec::new(), Vec::new());
             let o = Object { geometry: 0, transform, material: 0, emission: Rgb::ONE, light_samples: 1 };
             scene.area_light(0, &o).shape
         };
@@ -1288,23 +1294,8 @@ mod tests {
             .enumerate()
             .map(|(g, e)| Object { geometry: g, transform: e.2, material: 0, emission: Rgb::ZERO, light_samples: 1 })
             .collect();
-        let camera = crate::camera::Camera::look_at(
-            Vec3::Z,
-            Vec3::ZERO,
-            Vec3::Y,
-            crate::camera::Projection::Perspective { fov_y: 40.0 },
-        )
-        .unwrap();
-        let scene = Scene {
-            geometries,
-            objects,
-            materials: vec![Material::Diffuse { albedo: crate::material::Texture::Constant(Rgb::ONE) }],
-            lights: Vec::new(),
-            camera,
-            background: Rgb::ZERO,
-            ambient: Rgb::ZERO,
-            light_selection: LightSelection::Power,
-        };
+        let white = Material::Diffuse { albedo: crate::material::Texture::Constant(Rgb::ONE) };
+        let scene = scene_of(geometries, objects, vec![white]);
         // Every accelerator: the skip is taken in the world's own object test.
         for kind in crate::accel::AccelKind::ALL {
             let any = kind.build_world(&scene, &crate::accel::AccelParams::default());
