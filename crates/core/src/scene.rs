@@ -787,8 +787,8 @@ impl<'s, A: Accel> World<'s, A> {
     /// cannot meet it again (a flat object, or a convex one left outwards; see [`Reentry`]).
     /// The same holds backwards, for a shadow ray's end on a light: `p` that end, `d` pointing
     /// back along the ray. A query passing over such an object finds what it would find
-    /// testing it, without the test (rays off the walls of a room no longer pay for their own
-    /// wall), but for rounding: a shadow ray that grazes a sphere light's outline on its way to
+    /// testing it, without the test (rays off a rotated box or a tilted wall no longer pay
+    /// for it), but for rounding: a shadow ray that grazes a sphere light's outline on its way to
     /// a point the light's sampling chose as visible could be found blocked by the light
     /// itself, and no longer is.
     #[inline]
