@@ -808,9 +808,8 @@ impl<'s, A: Accel> World<'s, A> {
     /// meet them ([`World::leaving`]).
     #[inline(always)]
     pub fn shadowed(&self, hit: &Intersection, ng: Vec3, light: usize, ls: &LightSample) -> bool {
-        let wi = Vec3::from(ls.wi);
         if ls.infinite {
-            let r = spawn_ray(hit.p, ng, wi);
+            let r = spawn_ray(hit.p, ng, Vec3::from(ls.wi));
             return self.occluded_skipping(&r, f32::INFINITY, self.leaving(hit.object, hit.p, ng, r.d));
         }
         let (q, nq) = (Vec3::from(ls.p), Vec3::from(ls.n));
@@ -1270,7 +1269,7 @@ mod tests {
     fn rays_leaving_a_surface_pass_over_only_what_they_cannot_meet() {
         let mut geometries = Vec::new();
         let mut expect = Vec::new();
-        for (k, (name, mut m, want)) in crate::shape::mesh::tests::reentry_shapes().into_iter().enumerate() {
+        for (k, (name, mut m, want)) in crate::shape::reentry_shapes().into_iter().enumerate() {
             if m.indices.is_empty() {
                 continue;
             }

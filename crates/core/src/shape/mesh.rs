@@ -311,7 +311,7 @@ pub(crate) mod tests {
     }
 
     /// Meshes of several triangles, joined from parts.
-    pub(crate) fn joined(parts: &[Mesh]) -> Mesh {
+    fn joined(parts: &[Mesh]) -> Mesh {
         let mut m = Mesh::default();
         for p in parts {
             let base = m.positions.len() as u32;

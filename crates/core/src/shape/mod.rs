@@ -1,10 +1,12 @@
 //! Surfaces: triangle meshes (watertight ray/triangle test), spheres.
 
-pub(crate) mod mesh;
+mod mesh;
 mod sphere;
 mod tri4;
 mod triangle;
 
+#[cfg(test)]
+pub(crate) use mesh::tests::reentry_shapes;
 pub use mesh::{Mesh, MeshError, Reentry, REENTRY_MAX_CHECKS};
 pub use sphere::{intersect_sphere, Sphere};
 #[cfg(target_arch = "x86_64")]
