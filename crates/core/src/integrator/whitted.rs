@@ -23,7 +23,7 @@ use crate::accel::Accel;
 use crate::geometry::{spawn_ray, Ray};
 use crate::material::bsdf::Bsdf;
 use crate::material::{conductor_fresnel, fresnel, Frame, Material};
-use crate::sampling::{stratified_2d, Pcg32, Sampler};
+use crate::sampling::{Pcg32, Sampler, Strata};
 use crate::scene::{Intersection, Skip, World};
 use crate::Rgb;
 
@@ -224,9 +224,14 @@ impl Whitted {
                 continue; // Whitted sees the environment only along its rays (and the ambient term).
             }
             let n = light.samples();
+            // The strata, made once for the light's samples. Sample `s` takes cell `s`: every
+            // cell is drawn here and the jitters are independent, so a hash permutation of the
+            // cells (a dozen dependent multiplies a sample, as `stratified_2d` runs) would
+            // change the bits of the estimate but not its distribution.
+            let strata = Strata::new(n);
             let mut acc = Rgb::ZERO;
             for s in 0..n {
-                let u = stratified_2d(s, n, li as u32 ^ 0x9e37_79b9, cx.rng);
+                let u = strata.sample_in_order(s, li as u32 ^ 0x9e37_79b9, cx.rng);
                 let Some(ls) = light.sample(hit.p, u) else {
                     continue;
                 };
