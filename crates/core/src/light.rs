@@ -469,30 +469,7 @@ impl AreaLight {
                 if (p - *corner).dot(*normal) <= 0.0 {
                     return None; // Behind a one-sided emitter.
                 }
-                let area = *area;
-                match spherical_rectangle(p, *corner, *ex, *ey, area) {
-                    Some(r) => {
-                        let q = r.sample(u);
-                        let wi = (q - p).normalize_or_zero();
-                        if wi == Vec3::ZERO {
-                            return None;
-                        }
-                        let pdf = (1.0 / r.solid_angle) as f32;
-                        Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
-                    }
-                    None => {
-                        let q = *corner + *ex * u.x + *ey * u.y;
-                        let d = q - p;
-                        let dist2 = d.length_squared();
-                        let wi = d / dist2.sqrt();
-                        let cos_l = normal.dot(-wi);
-                        if !(cos_l > 0.0 && dist2 > 0.0) {
-                            return None;
-                        }
-                        let pdf = dist2 / (cos_l * area);
-                        Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
-                    }
-                }
+                self.rectangle_sample(p, u, spherical_rectangle(p, *corner, *ex, *ey, *area).as_ref())
             }
             AreaShape::Triangles { tris, cdf } => {
                 let total = *cdf.last()?;
@@ -518,6 +495,80 @@ impl AreaLight {
                 let pdf = dist2 / (cos_l * total);
                 Some(LightSample::new(wi, q, n, false, self.emission / pdf, pdf))
             }
+        }
+    }
+}
+
+impl AreaLight {
+    /// A sample of a rectangle light seen from `p` (in front of it): uniform in the solid angle
+    /// of its spherical rectangle `r` where that pays, by area otherwise.
+    #[inline(always)]
+    fn rectangle_sample(&self, p: Vec3, u: Vec2, r: Option<&SphericalRectangle>) -> Option<LightSample> {
+        let AreaShape::Rectangle { corner, ex, ey, normal, area } = &self.shape else { return None };
+        match r {
+            Some(r) => {
+                let q = r.sample(u);
+                let wi = (q - p).normalize_or_zero();
+                if wi == Vec3::ZERO {
+                    return None;
+                }
+                let pdf = (1.0 / r.solid_angle) as f32;
+                Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
+            }
+            None => {
+                let q = *corner + *ex * u.x + *ey * u.y;
+                let d = q - p;
+                let dist2 = d.length_squared();
+                let wi = d / dist2.sqrt();
+                let cos_l = normal.dot(-wi);
+                if !(cos_l > 0.0 && dist2 > 0.0) {
+                    return None;
+                }
+                let pdf = dist2 / (cos_l * *area);
+                Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
+            }
+        }
+    }
+}
+
+/// A light made ready for several samples from one point `p`: what [`Light::sample`] works out
+/// anew for every sample but does not depend on it (a rectangle's spherical rectangle, four
+/// arc cosines in double precision) is worked out once. Its samples are those of
+/// [`Light::sample`] at `p`, bit for bit.
+pub struct LightFrom<'a> {
+    light: &'a Light,
+    p: Vec3,
+    /// A rectangle light's spherical rectangle from `p`, where solid-angle sampling pays.
+    rectangle: Option<SphericalRectangle>,
+    /// A one-sided emitter that `p` is behind: no sample.
+    behind: bool,
+}
+
+impl Light {
+    /// This light made ready for samples from `p` (see [`LightFrom`]).
+    pub fn from_point(&self, p: Vec3) -> LightFrom<'_> {
+        let (mut rectangle, mut behind) = (None, false);
+        if let Light::Area(AreaLight { shape: AreaShape::Rectangle { corner, ex, ey, normal, area }, .. }) = self {
+            behind = (p - *corner).dot(*normal) <= 0.0;
+            if !behind {
+                rectangle = spherical_rectangle(p, *corner, *ex, *ey, *area);
+            }
+        }
+        LightFrom { light: self, p, rectangle, behind }
+    }
+}
+
+impl LightFrom<'_> {
+    /// [`Light::sample`] at the point this was made for; `u` is uniform in `[0, 1)²`.
+    pub fn sample(&self, u: Vec2) -> Option<LightSample> {
+        match self.light {
+            Light::Area(a @ AreaLight { shape: AreaShape::Rectangle { .. }, .. }) => {
+                if self.behind {
+                    return None;
+                }
+                a.rectangle_sample(self.p, u, self.rectangle.as_ref())
+            }
+            light => light.sample(self.p, u),
         }
     }
 }
@@ -629,6 +680,52 @@ mod tests {
         let far = rectangle(Vec3::new(-0.05, -0.05, 20.0), Vec3::new(0.0, 0.1, 0.0), Vec3::new(0.1, 0.0, 0.0));
         let e = irradiance(&far, 10_000);
         assert!((e - 0.01 / 400.0).abs() < 1e-3 * 0.01 / 400.0, "{e}");
+    }
+
+    /// Samples as a comparable tuple of bits (`LightSample` has no `PartialEq`).
+    fn bits(s: Option<LightSample>) -> Option<[u32; 14]> {
+        s.map(|s| {
+            let v = |a: glam::Vec3A| a.to_array().map(f32::to_bits);
+            let [a, b, c, d] = [v(s.wi), v(s.p), v(s.n), v(s.value)];
+            [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2], d[0], d[1], d[2], s.pdf.to_bits(), s.infinite as u32]
+        })
+    }
+
+    #[test]
+    fn a_light_made_ready_at_a_point_samples_as_the_light_does() {
+        // Rectangles seen large (solid-angle samples), small (area samples) and from behind,
+        // and every other kind of light, from points around them: `from_point(p).sample(u)`
+        // must be `sample(p, u)` bit for bit.
+        let lights = [
+            rectangle(Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 2.0, 0.0), Vec3::new(4.0, 0.0, 0.0)),
+            rectangle(Vec3::new(-0.5, -0.5, 3.0), Vec3::new(0.0, 1.0, 0.0), Vec3::new(1.0, 0.0, 0.0)),
+            Light::Area(AreaLight {
+                object: 0,
+                emission: Rgb::ONE,
+                samples: 4,
+                shape: AreaShape::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 2.0), radius: 0.5 }),
+            }),
+            Light::Point { position: Vec3::new(1.0, 2.0, 3.0), intensity: Rgb::splat(2.0) },
+            Light::Directional { direction: -Vec3::Z, irradiance: Rgb::ONE },
+            Light::Environment(env(Some(test_map()))),
+        ];
+        let points = [Vec3::ZERO, Vec3::new(1.0, 1.0, 2.0), Vec3::new(0.3, -0.2, 0.9), Vec3::new(5.0, 0.0, -1.0)];
+        let mut rng = Pcg32::new(9, 10);
+        let (mut some, mut spherical) = (0, 0);
+        for light in &lights {
+            for &p in &points {
+                let from = light.from_point(p);
+                spherical += from.rectangle.is_some() as u32;
+                for _ in 0..64 {
+                    let u = rng.next_2d();
+                    let (a, b) = (bits(light.sample(p, u)), bits(from.sample(u)));
+                    assert_eq!(a, b, "light {light:?} from {p}, u {u}");
+                    some += a.is_some() as u32;
+                }
+            }
+        }
+        // Both regimes of the rectangle and lights that do give samples were exercised.
+        assert!(spherical >= 2 && some > 1000, "{spherical} spherical rectangles, {some} samples");
     }
 
     #[test]

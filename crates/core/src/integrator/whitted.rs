@@ -229,10 +229,13 @@ impl Whitted {
             // cells (a dozen dependent multiplies a sample, as `stratified_2d` runs) would
             // change the bits of the estimate but not its distribution.
             let strata = Strata::new(n);
+            // What the light's samples from this point share (a rectangle's spherical
+            // rectangle) is worked out once for all of them.
+            let from = light.from_point(hit.p);
             let mut acc = Rgb::ZERO;
             for s in 0..n {
                 let u = strata.sample_in_order(s, li as u32 ^ 0x9e37_79b9, cx.rng);
-                let Some(ls) = light.sample(hit.p, u) else {
+                let Some(ls) = from.sample(u) else {
                     continue;
                 };
                 let ls_wi = Vec3::from(ls.wi);
