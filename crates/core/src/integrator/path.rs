@@ -78,12 +78,14 @@ impl Integrator for Path {
             let Some(hit) = next else {
                 l += beta * Vec3A::from(scene.background);
                 if let Some((li, env)) = world.environment() {
-                    let w = if prev_delta {
-                        1.0
+                    // Radiance and density from one lookup of the direction's image coordinates.
+                    let (radiance, w) = if prev_delta {
+                        (env.eval(dir), 1.0)
                     } else {
-                        power_heuristic(prev_pdf, world.light_probability(li) * env.pdf(dir))
+                        let (radiance, pdf) = env.eval_pdf(dir);
+                        (radiance, power_heuristic(prev_pdf, world.light_probability(li) * pdf))
                     };
-                    l += beta * Vec3A::from(env.eval(dir)) * w;
+                    l += beta * Vec3A::from(radiance) * w;
                 }
                 break;
             };
