@@ -79,7 +79,7 @@ impl EnvMap {
 impl Environment {
     /// Image coordinates of a direction in the environment's frame.
     fn uv(d: Vec3) -> Vec2 {
-        let u = (d.x.atan2(-d.z) / (2.0 * PI)).rem_euclid(1.0);
+        let u = (crate::sampling::atan2(d.x, -d.z) / (2.0 * PI)).rem_euclid(1.0);
         let v = d.y.clamp(-1.0, 1.0).acos() / PI;
         Vec2::new(u, v)
     }

@@ -343,6 +343,33 @@ pub fn sin_cos_octant(x: f32) -> (f32, f32) {
     (s, c)
 }
 
+/// `atan2(y, x)` in `[−π, π]`, within 3·10⁻⁷ rad of the exact value for finite arguments: the
+/// quadrant taken out exactly, the rest an arc tangent of `min / max` in `[0, 1]` by Cephes'
+/// `atanf` (its reduction about `tan(π/8)` and its minimax polynomial). Where the image
+/// coordinates of a direction are needed (an environment image's lookup and density, a
+/// sphere's UV), libm's `atan2f` cost about 290 instructions a call, a tenth of a render lit
+/// by an image. NaN arguments give NaN; `(±0, ±0)` gives `±0` or `±π` as `atan2` does.
+#[inline]
+pub fn atan2(y: f32, x: f32) -> f32 {
+    use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    let swap = ay > ax;
+    let (num, den) = if swap { (ax, ay) } else { (ay, ax) };
+    // 0 / 0 (both zero) is 0; NaN arguments stay NaN.
+    let t = if den == 0.0 { num } else { num / den };
+    let big = t > 0.414_213_57; // tan(π/8)
+    let (base, t) = if big { (FRAC_PI_4, (t - 1.0) / (t + 1.0)) } else { (0.0, t) };
+    let z = t * t;
+    let mut r = base + ((((8.053_744_5e-2 * z - 1.387_768_6e-1) * z + 1.997_771_1e-1) * z - 3.333_295e-1) * z * t + t);
+    if swap {
+        r = FRAC_PI_2 - r;
+    }
+    if x.is_sign_negative() {
+        r = PI - r;
+    }
+    r.copysign(y)
+}
+
 /// `(cos 2πu, sin 2πu)` for `u` in `[0, 1]`: the nearest quarter turn is taken out exactly
 /// (`4u − q` has no rounding error) and the rest is an angle of at most π/4.
 #[inline]
@@ -480,6 +507,44 @@ mod tests {
             worst = worst.max((s as f64 - a.sin()).abs()).max((c as f64 - a.cos()).abs());
         }
         assert!(worst < 1.2e-7, "turn: {worst:e}");
+    }
+
+    /// The polynomial arc tangent against f64's `atan2`: around the whole circle at several
+    /// radii, near the axes and diagonals, over magnitudes far apart, and at the signed zeros.
+    #[test]
+    fn polynomial_atan2_matches_f64() {
+        let mut worst = 0.0f64;
+        let mut check = |y: f32, x: f32| {
+            let (a, b) = (atan2(y, x) as f64, (y as f64).atan2(x as f64));
+            worst = worst.max((a - b).abs());
+        };
+        let n = 400_000;
+        for i in 0..n {
+            let a = std::f64::consts::TAU * i as f64 / n as f64;
+            for r in [1e-30f64, 1e-3, 1.0, 7.5, 1e30] {
+                check((r * a.sin()) as f32, (r * a.cos()) as f32);
+            }
+        }
+        let mut rng = Pcg32::new(1, 2);
+        for _ in 0..200_000 {
+            let (u, v) = (rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0);
+            let e = (rng.next_f32() * 60.0 - 30.0).exp2();
+            check(u, v * e);
+            check(u * e, v);
+            check(u, u * (1.0 + 1e-3 * v)); // near the diagonals
+        }
+        assert!(worst < 3e-7, "{worst:e}");
+        // Exact where atan2 is: the axes and the signed zeros.
+        use std::f32::consts::{FRAC_PI_2, PI};
+        assert_eq!(atan2(0.0, 1.0).to_bits(), 0.0f32.to_bits());
+        assert_eq!(atan2(-0.0, 1.0).to_bits(), (-0.0f32).to_bits());
+        assert_eq!(atan2(0.0, -1.0), PI);
+        assert_eq!(atan2(-0.0, -1.0), -PI);
+        assert_eq!(atan2(0.0, -0.0), PI);
+        assert_eq!(atan2(2.0, 0.0), FRAC_PI_2);
+        assert_eq!(atan2(-2.0, 0.0), -FRAC_PI_2);
+        assert_eq!(atan2(0.0, 0.0), 0.0);
+        assert!(atan2(f32::NAN, 1.0).is_nan() && atan2(1.0, f32::NAN).is_nan());
     }
 
     #[test]

@@ -1136,7 +1136,7 @@ impl<'s, A: Accel> World<'s, A> {
                 let n = (local.at(t) - s.center).normalize_or_zero();
                 let p = s.center + n * s.radius;
                 let uv = Vec2::new(
-                    0.5 + n.z.atan2(n.x) / std::f32::consts::TAU,
+                    0.5 + crate::sampling::atan2(n.z, n.x) / std::f32::consts::TAU,
                     n.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI,
                 );
                 (p, n, n, uv)
