@@ -348,7 +348,8 @@ pub fn sin_cos_octant(x: f32) -> (f32, f32) {
 /// `atanf` (its reduction about `tan(π/8)` and its minimax polynomial). Where the image
 /// coordinates of a direction are needed (an environment image's lookup and density, a
 /// sphere's UV), libm's `atan2f` cost about 290 instructions a call, a tenth of a render lit
-/// by an image. NaN arguments give NaN; `(±0, ±0)` gives `±0` or `±π` as `atan2` does.
+/// by an image. NaN arguments give NaN; `(±0, ±0)` gives `±0` or `±π` as `atan2` does; two
+/// infinite arguments give NaN (where `atan2` gives a multiple of π/4).
 #[inline]
 pub fn atan2(y: f32, x: f32) -> f32 {
     use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
