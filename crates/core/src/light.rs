@@ -579,6 +579,7 @@ pub struct LightFrom<'a> {
 
 impl Light {
     /// This light made ready for samples from `p` (see [`LightFrom`]).
+    #[inline]
     pub fn from_point(&self, p: Vec3) -> LightFrom<'_> {
         let (mut rectangle, mut behind) = (None, false);
         if let Light::Area(AreaLight { shape: AreaShape::Rectangle { corner, ex, ey, normal, area }, .. }) = self {
@@ -592,7 +593,9 @@ impl Light {
 }
 
 impl LightFrom<'_> {
-    /// [`Light::sample`] at the point this was made for; `u` is uniform in `[0, 1)²`.
+    /// [`Light::sample`] at the point this was made for; `u` is uniform in `[0, 1)²`. Inlined,
+    /// as `Light::sample` is, so that the sample reaches the caller in registers.
+    #[inline(always)]
     pub fn sample(&self, u: Vec2) -> Option<LightSample> {
         match self.light {
             Light::Area(a @ AreaLight { shape: AreaShape::Rectangle { .. }, .. }) => {
