@@ -269,14 +269,10 @@ fn div_rem(a: u32, n: u32) -> (u32, u32) {
     }
 }
 
-/// Sample `i` of `n` stratified in 2D: a jittered grid when `n` is a square, otherwise a Latin
-/// hypercube (one sample per row and per column), with a `key`-dependent pairing of the strata.
-pub fn stratified_2d(i: u32, n: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
-    Strata::new(n).sample(i, key, rng)
-}
-
-/// The strata of [`stratified_2d`] for `n` samples, worked out once for all of them (the
-/// renderer draws every camera sample from the same `n`).
+/// Samples stratified in 2D, `n` of them: a jittered grid when `n` is a square, otherwise a
+/// Latin hypercube (one sample per row and per column), with a `key`-dependent pairing of the
+/// strata. Worked out once for all `n` samples (the renderer draws every camera sample from the
+/// same `n`, Whitted's lights all of a point's samples).
 #[derive(Clone, Copy, Debug)]
 pub struct Strata {
     n: u32,
@@ -297,7 +293,8 @@ impl Strata {
         Strata { n, side, mask: mask_of(n), inv: if d.is_power_of_two() { 1.0 / d as f32 } else { 0.0 } }
     }
 
-    /// Sample `i` (of `n`): [`stratified_2d`]`(i, n, key, rng)`.
+    /// Sample `i` (of `n`), its cell on a jittered grid chosen by a hash permutation keyed by
+    /// `key`.
     #[inline]
     pub fn sample(&self, i: u32, key: u32, rng: &mut Pcg32) -> Vec2 {
         self.sample_with(i, key, rng, true)
@@ -645,7 +642,7 @@ mod tests {
             let strata = Strata::new(n);
             let side = (n as f32).sqrt() as u32;
             let (mut a, mut b) = (Pcg32::new(1, 2), Pcg32::new(1, 2));
-            let shuffled: Vec<Vec2> = (0..n).map(|i| stratified_2d(i, n, key, &mut a)).collect();
+            let shuffled: Vec<Vec2> = (0..n).map(|i| strata.sample(i, key, &mut a)).collect();
             let in_order: Vec<Vec2> = (0..n).map(|i| strata.sample_in_order(i, key, &mut b)).collect();
             for pts in [&shuffled, &in_order] {
                 assert!(pts.iter().all(|p| p.x >= 0.0 && p.x < 1.0 && p.y >= 0.0 && p.y < 1.0));

@@ -226,7 +226,7 @@ impl Whitted {
             let n = light.samples();
             // The strata, made once for the light's samples. Sample `s` takes cell `s`: every
             // cell is drawn here and the jitters are independent, so a hash permutation of the
-            // cells (a dozen dependent multiplies a sample, as `stratified_2d` runs) would
+            // cells (a dozen dependent multiplies a sample, as `Strata::sample` runs) would
             // change the bits of the estimate but not its distribution.
             let strata = Strata::new(n);
             // What the light's samples from this point share (a rectangle's spherical
