@@ -132,6 +132,24 @@ impl RenderSettings {
 const TILE: u32 = 16;
 /// Splatting reaches at most this many pixels beyond a sample's own (filter radius 16.5).
 const MAX_SPLAT_MARGIN: u32 = 16;
+/// The most pixels a splatted sample reaches along one axis.
+const SPLAT_SPAN: usize = 2 * MAX_SPLAT_MARGIN as usize + 1;
+
+/// The pixels along one axis (of `n`) within `m` of pixel `c` that a sample at film coordinate
+/// `f` reaches through `filter`, written to `out` in increasing order with their weights; returns
+/// how many there are. Pixels of weight zero are left out.
+#[inline]
+fn splat_weights(filter: &Filter, f: f32, c: u32, m: u32, n: u32, out: &mut [(u32, f32); SPLAT_SPAN]) -> usize {
+    let mut k = 0;
+    for p in c.saturating_sub(m)..=(c + m).min(n - 1) {
+        let wt = filter.eval_1d(f - (p as f32 + 0.5));
+        if wt != 0.0 {
+            out[k] = (p, wt);
+            k += 1;
+        }
+    }
+    k
+}
 
 /// Renders the world. `progress(pixels)` is called as tiles finish (from worker threads).
 /// Returns the image and the summed ray statistics.
@@ -175,6 +193,8 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                 let bw = (x1 - x0 + 2 * m) as usize;
                 let mut acc = vec![Accum::default(); bw * (y1 - y0 + 2 * m) as usize];
                 let mut packets = CameraPackets::new();
+                // A splatted sample's columns and rows with their weights.
+                let (mut cols, mut rows) = ([(0, 0.0); SPLAT_SPAN], [(0, 0.0); SPLAT_SPAN]);
                 let aovs = settings.aovs;
                 for y in y0..y1 {
                     for x in x0..x1 {
@@ -204,21 +224,14 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                                     }
                                     return;
                                 }
-                                let (lo_x, hi_x) = (x.saturating_sub(m), (x + m).min(w - 1));
-                                let (lo_y, hi_y) = (y.saturating_sub(m), (y + m).min(h - 1));
-                                // The filter is separable: one weight per column and per row.
-                                let mut wx = [0.0f32; 2 * MAX_SPLAT_MARGIN as usize + 1];
-                                for (k, px) in (lo_x..=hi_x).enumerate() {
-                                    wx[k] = settings.filter.eval_1d(film.x - (px as f32 + 0.5));
-                                }
-                                for py in lo_y..=hi_y {
-                                    let wy = settings.filter.eval_1d(film.y - (py as f32 + 0.5));
-                                    if wy == 0.0 {
-                                        continue;
-                                    }
+                                // The filter is separable: one weight per column and per row,
+                                // and only those it reaches are visited.
+                                let nc = splat_weights(&settings.filter, film.x, x, m, w, &mut cols);
+                                let nr = splat_weights(&settings.filter, film.y, y, m, h, &mut rows);
+                                for &(py, wy) in &rows[..nr] {
                                     let row = (py + m - y0) as usize * bw;
-                                    for (k, px) in (lo_x..=hi_x).enumerate() {
-                                        let wt = wx[k] * wy;
+                                    for &(px, wx) in &cols[..nc] {
+                                        let wt = wx * wy;
                                         if wt != 0.0 {
                                             acc[row + (px + m - x0) as usize].add(&sample, wt, aovs);
                                         }
@@ -445,20 +458,7 @@ mod tests {
     }
 
     fn packets_match_single_rays(camera: Camera, spp: u32, reconstruction: Reconstruction, filter: Filter) {
-        let scene = Scene {
-            geometries: vec![Geometry::Mesh(Mesh::icosphere(3))],
-            objects: vec![Object { geometry: 0, transform: None, material: 0, emission: Rgb::ZERO, light_samples: 1 }],
-            materials: vec![Material::Diffuse { albedo: Texture::Constant(Rgb::new(0.7, 0.6, 0.5)) }],
-            lights: vec![Light::Environment(Environment {
-                scale: Rgb::ONE,
-                map: None,
-                to_world: glam::Mat3::IDENTITY,
-            })],
-            camera,
-            background: Rgb::ZERO,
-            ambient: Rgb::ZERO,
-            light_selection: LightSelection::Power,
-        };
+        let scene = lit_sphere(camera);
         let settings = RenderSettings {
             width: 12,
             height: 10,
@@ -494,5 +494,80 @@ mod tests {
             }
             assert!(lit > 20 * spp as usize, "{camera:?}: {lit} camera samples hit the sphere");
         });
+    }
+
+    /// Splatting through a Gaussian wider than a pixel (Mitsuba's default filter) gives each
+    /// pixel `Σ w L / Σ w` over every sample of every pixel whose filter reaches it, here worked
+    /// out sample by sample over the whole image (the renderer sums by tile, with margins, in
+    /// another order: hence the tolerance). The image spans two tiles each way, so samples
+    /// reach across tile edges and are cut off at the image's.
+    #[test]
+    fn gaussian_splatting_weighs_every_pixel_the_filter_reaches() {
+        let camera =
+            Camera::look_at(Vec3::new(0.4, 0.3, 3.0), Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 40.0 })
+                .unwrap();
+        let scene = lit_sphere(camera);
+        let filter = Filter::gaussian(2.0, 0.5);
+        let settings = RenderSettings {
+            width: TILE + 5,
+            height: TILE + 3,
+            spp: 3,
+            threads: 2,
+            reconstruction: Reconstruction::Splat,
+            filter: filter.clone(),
+            ..RenderSettings::default()
+        };
+        let integrator = Path { max_depth: 3, rr_depth: 2 };
+        let world = AccelKind::DEFAULT.build_world(&scene, &AccelParams::default());
+        crate::with_world!(&world, w => {
+            let (image, _) = render(w, &integrator, &settings, &|_| {});
+            let (width, height) = (settings.width as usize, settings.height as usize);
+            let (mut sum, mut weight) = (vec![Rgb::ZERO; width * height], vec![0.0f32; width * height]);
+            let strata = Strata::new(settings.spp);
+            for y in 0..settings.height {
+                for x in 0..settings.width {
+                    let pixel = y as u64 * settings.width as u64 + x as u64;
+                    let key = (crate::sampling::mix64(settings.seed ^ pixel) >> 32) as u32;
+                    for i in 0..settings.spp {
+                        let (mut sampler, film, lens) = camera_film(w, &settings, &strata, x, y, pixel, key, i);
+                        let ray = w.scene.camera.ray(film, settings.width, settings.height, lens);
+                        let hit = w.intersect(&ray, f32::INFINITY);
+                        let l = integrator.radiance(w, &ray, hit, &mut sampler, &mut RayStats::default());
+                        for (j, (s, wt)) in sum.iter_mut().zip(&mut weight).enumerate() {
+                            let centre = Vec2::new((j % width) as f32 + 0.5, (j / width) as f32 + 0.5);
+                            let f = filter.eval(film - centre);
+                            *s += l * f;
+                            *wt += f;
+                        }
+                    }
+                }
+            }
+            let mut reached = 0;
+            for (j, (s, wt)) in sum.iter().zip(&weight).enumerate() {
+                let want = *s / *wt;
+                let got = image.pixels[j];
+                assert!((got - want).abs().max_element() <= 1e-5 * want.max_element().max(1.0), "pixel {j}: {got} against {want}");
+                reached += usize::from(want.max_element() > 0.0);
+            }
+            assert!(reached > width * height / 4, "{reached} pixels lit");
+        });
+    }
+
+    /// A diffuse icosphere under a white sky, seen by `camera`.
+    fn lit_sphere(camera: Camera) -> Scene {
+        Scene {
+            geometries: vec![Geometry::Mesh(Mesh::icosphere(3))],
+            objects: vec![Object { geometry: 0, transform: None, material: 0, emission: Rgb::ZERO, light_samples: 1 }],
+            materials: vec![Material::Diffuse { albedo: Texture::Constant(Rgb::new(0.7, 0.6, 0.5)) }],
+            lights: vec![Light::Environment(Environment {
+                scale: Rgb::ONE,
+                map: None,
+                to_world: glam::Mat3::IDENTITY,
+            })],
+            camera,
+            background: Rgb::ZERO,
+            ambient: Rgb::ZERO,
+            light_selection: LightSelection::Power,
+        }
     }
 }
