@@ -309,7 +309,8 @@ impl SphericalRectangle {
     pub fn sample(&self, u: Vec2) -> Vec3 {
         let (u0, u1) = (u.x as f64, u.y as f64);
         let au = u0 * self.solid_angle + self.k;
-        let fu = (au.cos() * self.b0 - self.b1) / au.sin();
+        let (sin_au, cos_au) = crate::sampling::sin_cos_f64(au);
+        let fu = (cos_au * self.b0 - self.b1) / sin_au;
         let cu = (1.0 / (fu * fu + self.b0 * self.b0).sqrt()).copysign(fu).clamp(-1.0, 1.0);
         let xu = (-(cu * self.z0) / (1.0 - cu * cu).max(1e-300).sqrt()).clamp(self.x0, self.x1);
         let d = (xu * xu + self.z0 * self.z0).sqrt();

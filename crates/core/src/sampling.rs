@@ -340,6 +340,48 @@ pub fn sin_cos_octant(x: f32) -> (f32, f32) {
     (s, c)
 }
 
+/// `(sin x, cos x)` in double precision, within 3·10⁻¹⁶ of the true values for `|x| ≤ 16` (the
+/// angles of [`crate::light::SphericalRectangle::sample`], in `[0, 2π]`); beyond, libm's. The
+/// nearest quarter turn is taken out with π/2 in two parts (its first 33 bits, whose multiples
+/// by the quarter count are exact, and the rest), and what is left, at most π/4, goes through
+/// fdlibm's minimax polynomials for `sin` and `cos` on `[−π/4, π/4]`. libm's `sincos` in f64
+/// cost about 140 instructions a call, half of a spherical rectangle's sample.
+#[inline]
+pub fn sin_cos_f64(x: f64) -> (f64, f64) {
+    if x.is_nan() || x.abs() > 16.0 {
+        return x.sin_cos();
+    }
+    // π/2 to 33 bits, and the rest.
+    const PIO2_HI: f64 = 1.570_796_326_734_125_6;
+    const PIO2_LO: f64 = 6.077_100_506_506_192e-11;
+    // Adding 1.5 · 2^52 rounds to the nearest integer (`round` is a call on the x86-64
+    // baseline); |q| ≤ 11.
+    const SHIFTER: f64 = 6_755_399_441_055_744.0;
+    let q = (x * std::f64::consts::FRAC_2_PI + SHIFTER) - SHIFTER;
+    let r = (x - q * PIO2_HI) - q * PIO2_LO;
+    let z = r * r;
+    let s = r + r
+        * z
+        * (-1.666_666_666_666_663_2e-1
+            + z * (8.333_333_333_322_49e-3
+                + z * (-1.984_126_982_985_795e-4
+                    + z * (2.755_731_370_707_006_8e-6
+                        + z * (-2.505_076_025_340_686_3e-8 + z * 1.589_690_995_211_55e-10)))));
+    let c = 1.0 - 0.5 * z
+        + z * z
+            * (4.166_666_666_666_66e-2
+                + z * (-1.388_888_888_887_411e-3
+                    + z * (2.480_158_728_947_673e-5
+                        + z * (-2.755_731_435_139_066_3e-7
+                            + z * (2.087_572_321_298_175e-9 + z * -1.135_964_755_778_819_5e-11)))));
+    match q as i64 & 3 {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
+
 /// `atan2(y, x)` in `[−π, π]`, within 3·10⁻⁷ rad of the exact value for finite arguments: the
 /// quadrant taken out exactly, the rest an arc tangent of `min / max` in `[0, 1]` by Cephes'
 /// `atanf` (its reduction about `tan(π/8)` and its minimax polynomial). Where the image
@@ -509,6 +551,30 @@ mod tests {
 
     /// The polynomial arc tangent against f64's `atan2`: around the whole circle at several
     /// radii, near the axes and diagonals, over magnitudes far apart, and at the signed zeros.
+    #[test]
+    fn polynomial_sin_cos_matches_libm_in_f64() {
+        let mut worst = 0.0f64;
+        let mut check = |x: f64| {
+            let ((s, c), (s0, c0)) = (sin_cos_f64(x), x.sin_cos());
+            worst = worst.max((s - s0).abs()).max((c - c0).abs());
+        };
+        let n = 2_000_000;
+        for i in 0..=n {
+            check(-0.5 + (std::f64::consts::TAU + 1.0) * i as f64 / n as f64);
+        }
+        let mut rng = Pcg32::new(5, 6);
+        for _ in 0..200_000 {
+            check((rng.next_f32() as f64 * 2.0 - 1.0) * 16.0);
+            // Near the quarter turns, where the reduction leaves little.
+            check(std::f64::consts::FRAC_PI_2 * (rng.next_u32() % 11) as f64 + (rng.next_f32() as f64 - 0.5) * 1e-9);
+        }
+        assert!(worst < 3e-16, "{worst:e}");
+        assert_eq!(sin_cos_f64(0.0), (0.0, 1.0));
+        // Beyond the reduced range and for NaN: libm's answer.
+        assert_eq!(sin_cos_f64(100.0), 100.0f64.sin_cos());
+        assert!(sin_cos_f64(f64::NAN).0.is_nan());
+    }
+
     #[test]
     fn polynomial_atan2_matches_f64() {
         let mut worst = 0.0f64;
