@@ -808,9 +808,16 @@ impl<'s, A: Accel> World<'s, A> {
     /// meet them ([`World::leaving`]).
     #[inline(always)]
     pub fn shadowed(&self, hit: &Intersection, ng: Vec3, light: usize, ls: &LightSample) -> bool {
+        let (r, t_max, skip) = self.shadow_ray(hit, ng, light, ls);
+        self.occluded_skipping(&r, t_max, skip)
+    }
+
+    /// The shadow ray [`World::shadowed`] traces: the ray, its `t_max` and what it passes over.
+    #[inline(always)]
+    pub fn shadow_ray(&self, hit: &Intersection, ng: Vec3, light: usize, ls: &LightSample) -> (Ray, f32, Skip) {
         if ls.infinite {
             let r = spawn_ray(hit.p, ng, Vec3::from(ls.wi));
-            return self.occluded_skipping(&r, f32::INFINITY, self.leaving(hit.object, hit.p, ng, r.d));
+            return (r, f32::INFINITY, self.leaving(hit.object, hit.p, ng, r.d));
         }
         let (q, nq) = (Vec3::from(ls.p), Vec3::from(ls.n));
         let (r, t_max) = spawn_ray_to(hit.p, ng, q, nq);
@@ -819,7 +826,7 @@ impl<'s, A: Accel> World<'s, A> {
         if at != NO_OBJECT {
             skip = skip.and(self.leaving(at, q, nq, -r.d));
         }
-        self.occluded_skipping(&r, t_max, skip)
+        (r, t_max, skip)
     }
 
     /// The area light of an object, if it emits.
@@ -1093,25 +1100,7 @@ impl<'s, A: Accel> World<'s, A> {
             return tris.any(accel, ray, &mut None, t_max);
         }
         let mut shared = None;
-        let mut test = |obj: u32, tmax: f32| {
-            if skip.has(obj) {
-                return false;
-            }
-            if let Some(blocks) = self.direct_blocks(obj) {
-                return Tri4::any_in(blocks, shared_ray4(&mut shared, ray), tmax);
-            }
-            let o = &self.scene.objects[obj as usize];
-            match &self.scene.geometries[o.geometry] {
-                Geometry::Sphere(s) => {
-                    let local = o.transform.as_ref().map_or(*ray, |x| x.ray_to_object(ray));
-                    intersect_sphere(s, local.o, local.d, tmax).is_some()
-                }
-                Geometry::Mesh(_) => {
-                    let Some(accel) = self.blas[o.geometry].as_ref() else { return false };
-                    with_mesh_ray(o, ray, &mut shared, |local, r4| self.tris[o.geometry].any(accel, local, r4, tmax))
-                }
-            }
-        };
+        let mut test = |obj: u32, tmax: f32| !skip.has(obj) && self.any_in_object(obj, ray, &mut shared, tmax);
         if self.scene.objects.len() == 1 {
             test(0, t_max)
         } else if self.top_by_object {
@@ -1119,6 +1108,84 @@ impl<'s, A: Accel> World<'s, A> {
         } else {
             self.top.any(ray, t_max, test)
         }
+    }
+
+    /// Whether object `obj` blocks `ray` within `0 < t < tmax`; `shared` as in
+    /// [`World::closest_in_object`].
+    #[inline(always)]
+    fn any_in_object(&self, obj: u32, ray: &Ray, shared: &mut Option<Ray4>, tmax: f32) -> bool {
+        if let Some(blocks) = self.direct_blocks(obj) {
+            return Tri4::any_in(blocks, shared_ray4(shared, ray), tmax);
+        }
+        let o = &self.scene.objects[obj as usize];
+        match &self.scene.geometries[o.geometry] {
+            Geometry::Sphere(s) => {
+                let local = o.transform.as_ref().map_or(*ray, |x| x.ray_to_object(ray));
+                intersect_sphere(s, local.o, local.d, tmax).is_some()
+            }
+            Geometry::Mesh(_) => {
+                let Some(accel) = self.blas[o.geometry].as_ref() else { return false };
+                with_mesh_ray(o, ray, shared, |local, r4| self.tris[o.geometry].any(accel, local, r4, tmax))
+            }
+        }
+    }
+
+    /// [`World::occluded_skipping`] for the `active` ones of eight rays, each with its own
+    /// `t_max` and `skip`: the mask of those blocked. Coherent rays (a point's shadow rays to
+    /// the samples of one area light) traverse a single mesh's tree or a top level of objects
+    /// together, as [`World::hit_packet8`]'s do; a ray stops taking part once something blocks
+    /// it. Every ray gets the answer it gets alone: the same objects passed over, the same
+    /// triangle arithmetic, and boxes that never cut off a hit either way.
+    pub fn occluded_packet8(&self, rays: &[Ray; 8], active: u8, t_max: &[f32; 8], skip: &[Skip; 8]) -> u8 {
+        let one_by_one = || {
+            crate::accel::lanes(active.into())
+                .filter(|&i| self.occluded_skipping(&rays[i], t_max[i], skip[i]))
+                .fold(0u8, |m, i| m | 1 << i)
+        };
+        if !self.packets {
+            return one_by_one();
+        }
+        // A blocked ray's bound falls below every box's entry distance, so the walk drops it.
+        const DONE: f32 = -1.0;
+        let mut packet = PacketRays::default();
+        let mut t = *t_max;
+        let mut rec = [None; 8];
+        let mut blocked = 0u8;
+        if let Some((accel, blocks, ranges, labelled)) = self.packet_tree() {
+            // As `occluded_skipping` for this scene, nothing is passed over.
+            accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lanes, tm| {
+                let lanes = lanes & !blocked;
+                let blocks = TriData::leaf_blocks(blocks, ranges, labelled, leaf);
+                let hit = packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec);
+                for lane in crate::accel::lanes(hit.into()) {
+                    tm[lane] = DONE;
+                }
+                blocked |= hit;
+                hit
+            });
+        } else if self.top_packets() {
+            self.top.closest_leaf_packet8(rays, active, &mut t, |obj, lanes, tm| {
+                let passed = (0..8).fold(0u8, |m, i| m | (skip[i].has(obj) as u8) << i);
+                let lanes = lanes & !blocked & !passed;
+                if lanes == 0 {
+                    return 0;
+                }
+                let hit = match self.direct_blocks(obj) {
+                    Some(blocks) => packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec),
+                    None => crate::accel::lanes(lanes.into())
+                        .filter(|&i| self.any_in_object(obj, &rays[i], &mut packet.r4[i], tm[i]))
+                        .fold(0u8, |m, i| m | 1 << i),
+                };
+                for lane in crate::accel::lanes(hit.into()) {
+                    tm[lane] = DONE;
+                }
+                blocked |= hit;
+                hit
+            });
+        } else {
+            return one_by_one();
+        }
+        blocked
     }
 
     /// Everything shading needs about the hit `h` of `ray` (as [`World::hit`] or a packet query

@@ -635,3 +635,82 @@ fn ray_packets_hit_what_single_rays_hit() {
         }
     }
 }
+
+/// Shadow rays traced eight at a time (`World::occluded_packet8`, as Whitted traces an area
+/// light's samples from one point) are blocked exactly where each one traced alone is
+/// (`World::occluded_skipping`): from points on surfaces to points around a spot (close
+/// together, as a small light's samples are, or spread out), each with its own `t_max`, or to
+/// infinity, passing over the surface they leave where it cannot be met again; some lanes idle.
+/// In the default scene (spheres, quads, a box, the light), a single mesh, a small mesh and
+/// the two-level adversarial scene, for every accelerator.
+#[test]
+fn shadow_ray_packets_are_blocked_where_single_rays_are() {
+    use snell_core::geometry::{spawn_ray, spawn_ray_to};
+    let default = snell_io::scene::load(&crate::common::repo_scene("default.toml")).unwrap().scene;
+    let mesh = Scene {
+        geometries: vec![Geometry::Mesh(Mesh::icosphere(4))],
+        objects: vec![object(0, None)],
+        ..adversarial_scene(1)
+    };
+    let small = Mesh::cuboid(Vec3::splat(-1.2), Vec3::new(1.0, 0.8, 1.1));
+    let small =
+        Scene { geometries: vec![Geometry::Mesh(small)], objects: vec![object(0, None)], ..adversarial_scene(1) };
+    // Each scene with the region its rays start from and aim at (centre, size).
+    let scenes = [
+        ("default", default, Vec3::new(0.0, 1.0, 0.0), 2.0),
+        ("mesh", mesh, Vec3::ZERO, 2.5),
+        ("small mesh", small, Vec3::ZERO, 2.5),
+        ("two-level", adversarial_scene(3), Vec3::ZERO, 6.0),
+    ];
+    for (name, scene, centre, size) in scenes {
+        for kind in AccelKind::ALL {
+            let world = kind.build_world(&scene, &AccelParams::default());
+            let (blocked, checked) = snell_core::with_world!(&world, w => {
+                let mut rng = Pcg32::new(9, 10);
+                let (mut blocked, mut checked) = (0, 0);
+                // Points on surfaces: where rays from around the scene first meet one.
+                let starts: Vec<Ray> = (0..600)
+                    .map(|_| {
+                        let o = centre + rand_vec(&mut rng, size);
+                        Ray::new(o, centre + rand_vec(&mut rng, 0.3 * size) - o)
+                    })
+                    .collect();
+                for (k, start) in starts.iter().enumerate() {
+                    let Some(hit) = w.intersect(start, f32::INFINITY) else { continue };
+                    let ng = if hit.ng.dot(start.d) > 0.0 { -hit.ng } else { hit.ng };
+                    let spot = centre + rand_vec(&mut rng, 0.5 * size);
+                    let spread = if k % 2 == 0 { 0.05 * size } else { 0.5 * size };
+                    let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
+                    let mut t_max = [0.0f32; 8];
+                    let mut skip = [snell_core::scene::Skip::NONE; 8];
+                    for lane in 0..8 {
+                        let q = spot + rand_vec(&mut rng, spread);
+                        let (r, t) = if k % 5 == 4 {
+                            (spawn_ray(hit.p, ng, q - hit.p), f32::INFINITY)
+                        } else {
+                            spawn_ray_to(hit.p, ng, q, Vec3::ZERO)
+                        };
+                        (rays[lane], t_max[lane], skip[lane]) = (r, t, w.leaving(hit.object, hit.p, ng, r.d));
+                    }
+                    let active = if k % 3 == 2 { (k * 37 % 255 + 1) as u8 } else { 0xff };
+                    let got = w.occluded_packet8(&rays, active, &t_max, &skip);
+                    assert_eq!(got & !active, 0, "{name} {kind:?}: idle lanes reported blocked");
+                    for lane in 0..8 {
+                        if active & (1 << lane) == 0 {
+                            continue;
+                        }
+                        let want = w.occluded_skipping(&rays[lane], t_max[lane], skip[lane]);
+                        assert_eq!(got & (1 << lane) != 0, want, "{name} {kind:?}: ray {k}, lane {lane}");
+                        blocked += usize::from(want);
+                        checked += 1;
+                    }
+                }
+                (blocked, checked)
+            });
+            assert!(
+                blocked > checked / 10 && blocked < checked * 9 / 10,
+                "{name} {kind:?}: {blocked} of {checked} blocked"
+            );
+        }
+    }
+}
