@@ -289,6 +289,10 @@ fn block_range(label: u32) -> (u32, u32) {
     (a, a + (label & 7) + 1)
 }
 
+/// The bound a packet's ray gets once something blocks it ([`World::occluded_packet8`]):
+/// below every box's entry distance, so that the walk leaves the ray out from then on.
+const BLOCKED: f32 = -1.0;
+
 /// `World::object_blocks`: the object is not an untransformed mesh of one block range.
 const NOT_DIRECT: u32 = u32::MAX;
 
@@ -1145,47 +1149,78 @@ impl<'s, A: Accel> World<'s, A> {
         if !self.packets {
             return one_by_one();
         }
-        // A blocked ray's bound falls below every box's entry distance, so the walk drops it.
-        const DONE: f32 = -1.0;
         let mut packet = PacketRays::default();
         let mut t = *t_max;
-        let mut rec = [None; 8];
-        let mut blocked = 0u8;
-        if let Some((accel, blocks, ranges, labelled)) = self.packet_tree() {
+        if self.packet_tree().is_some() {
             // As `occluded_skipping` for this scene, nothing is passed over.
-            accel.closest_leaf_packet8(rays, active, &mut t, |leaf, lanes, tm| {
-                let lanes = lanes & !blocked;
-                let blocks = TriData::leaf_blocks(blocks, ranges, labelled, leaf);
-                let hit = packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec);
-                for lane in crate::accel::lanes(hit.into()) {
-                    tm[lane] = DONE;
-                }
-                blocked |= hit;
-                hit
-            });
-        } else if self.top_packets() {
-            self.top.closest_leaf_packet8(rays, active, &mut t, |obj, lanes, tm| {
-                let passed = (0..8).fold(0u8, |m, i| m | (skip[i].has(obj) as u8) << i);
-                let lanes = lanes & !blocked & !passed;
-                if lanes == 0 {
-                    return 0;
-                }
-                let hit = match self.direct_blocks(obj) {
-                    Some(blocks) => packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec),
-                    None => crate::accel::lanes(lanes.into())
-                        .filter(|&i| self.any_in_object(obj, &rays[i], &mut packet.r4[i], tm[i]))
-                        .fold(0u8, |m, i| m | 1 << i),
-                };
-                for lane in crate::accel::lanes(hit.into()) {
-                    tm[lane] = DONE;
-                }
-                blocked |= hit;
-                hit
-            });
-        } else {
+            let g = self.scene.objects[0].geometry;
+            return self.any_packet_in_mesh(g, rays, active, &mut t, &mut packet).unwrap_or_else(one_by_one);
+        }
+        if !self.top_packets() {
             return one_by_one();
         }
+        let mut rec = [None; 8];
+        let mut blocked = 0u8;
+        self.top.closest_leaf_packet8(rays, active, &mut t, |obj, lanes, tm| {
+            let passed = (0..8).fold(0u8, |m, i| m | (skip[i].has(obj) as u8) << i);
+            let lanes = lanes & !blocked & !passed;
+            if lanes == 0 {
+                return 0;
+            }
+            let o = &self.scene.objects[obj as usize];
+            let hit = match (self.direct_blocks(obj), &o.transform, &self.scene.geometries[o.geometry]) {
+                (Some(blocks), _, _) => packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec),
+                // A transformed mesh: its rays taken into its space and tested together there.
+                (None, Some(x), Geometry::Mesh(_)) if lanes.count_ones() >= 2 => {
+                    let local = rays.map(|r| x.ray_to_object(&r));
+                    let mut local_t = *tm;
+                    self.any_packet_in_mesh(o.geometry, &local, lanes, &mut local_t, &mut PacketRays::default())
+                        .unwrap_or(0)
+                }
+                _ => crate::accel::lanes(lanes.into())
+                    .filter(|&i| self.any_in_object(obj, &rays[i], &mut packet.r4[i], tm[i]))
+                    .fold(0u8, |m, i| m | 1 << i),
+            };
+            for lane in crate::accel::lanes(hit.into()) {
+                tm[lane] = BLOCKED;
+            }
+            blocked |= hit;
+            hit
+        });
         blocked
+    }
+
+    /// The `active` ones of eight rays (in its own space) that the triangles of mesh geometry
+    /// `g` block within their bound `t` (a blocked ray's bound dropped to [`BLOCKED`]): its
+    /// blocks tested together, under its structure where it has one. None where its
+    /// triangles are not in blocks (a structure without leaves of blocks).
+    fn any_packet_in_mesh(
+        &self,
+        g: usize,
+        rays: &[Ray; 8],
+        active: u8,
+        t: &mut [f32; 8],
+        packet: &mut PacketRays,
+    ) -> Option<u8> {
+        let TriData::Leaves { blocks, ranges, labelled } = &self.tris[g] else { return None };
+        let mut rec = [None; 8];
+        if let Some((a, b)) = TriData::one_range(ranges) {
+            let blocks = &blocks[a as usize..b as usize];
+            return Some(packet.closest_in_blocks(rays, active, self.avx2, blocks, active, t, &mut rec));
+        }
+        let accel = self.blas[g].as_ref()?;
+        let mut blocked = 0u8;
+        accel.closest_leaf_packet8(rays, active, t, |leaf, lanes, tm| {
+            let lanes = lanes & !blocked;
+            let blocks = TriData::leaf_blocks(blocks, ranges, *labelled, leaf);
+            let hit = packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec);
+            for lane in crate::accel::lanes(hit.into()) {
+                tm[lane] = BLOCKED;
+            }
+            blocked |= hit;
+            hit
+        });
+        Some(blocked)
     }
 
     /// Everything shading needs about the hit `h` of `ray` (as [`World::hit`] or a packet query
