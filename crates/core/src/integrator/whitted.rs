@@ -279,7 +279,8 @@ impl Whitted {
             // Several samples' shadow rays leave one point for one light, close together:
             // they are traced eight at a time as a packet, and the unblocked ones summed in
             // sample order (the same sum, bit for bit, as each traced alone).
-            let mut batch = ShadowBatch::new();
+            // Made only for a light with several samples (a point light's one would pay for it).
+            let mut batch: Option<ShadowBatch> = None;
             for s in 0..n {
                 let u = strata.sample_in_order(s, li as u32 ^ 0x9e37_79b9, cx.rng);
                 let Some(ls) = from.sample(u) else {
@@ -301,12 +302,15 @@ impl Whitted {
                     continue;
                 }
                 let (ray, t_max, skip) = cx.world.shadow_ray(hit, ng, li, &ls);
-                batch.push(ray, t_max, skip, f * Vec3::from(ls.value));
-                if batch.n == 8 {
-                    batch.flush(cx.world, &mut acc);
+                let b = batch.get_or_insert_with(ShadowBatch::new);
+                b.push(ray, t_max, skip, f * Vec3::from(ls.value));
+                if b.n == 8 {
+                    b.flush(cx.world, &mut acc);
                 }
             }
-            batch.flush(cx.world, &mut acc);
+            if let Some(b) = &mut batch {
+                b.flush(cx.world, &mut acc);
+            }
             sum += acc / n as f32;
         }
         sum
