@@ -293,6 +293,17 @@ fn block_range(label: u32) -> (u32, u32) {
 /// below every box's entry distance, so that the walk leaves the ray out from then on.
 const BLOCKED: f32 = -1.0;
 
+/// Drops the rays of `hit` from a packet walk (their bound set to [`BLOCKED`]) and adds them
+/// to `blocked`; returns `hit`, as the walk's leaf test does.
+#[inline(always)]
+fn drop_blocked(hit: u8, t_max: &mut [f32; 8], blocked: &mut u8) -> u8 {
+    for lane in crate::accel::lanes(hit.into()) {
+        t_max[lane] = BLOCKED;
+    }
+    *blocked |= hit;
+    hit
+}
+
 /// `World::object_blocks`: the object is not an untransformed mesh of one block range.
 const NOT_DIRECT: u32 = u32::MAX;
 
@@ -1181,11 +1192,7 @@ impl<'s, A: Accel> World<'s, A> {
                     .filter(|&i| self.any_in_object(obj, &rays[i], &mut packet.r4[i], tm[i]))
                     .fold(0u8, |m, i| m | 1 << i),
             };
-            for lane in crate::accel::lanes(hit.into()) {
-                tm[lane] = BLOCKED;
-            }
-            blocked |= hit;
-            hit
+            drop_blocked(hit, tm, &mut blocked)
         });
         blocked
     }
@@ -1214,11 +1221,7 @@ impl<'s, A: Accel> World<'s, A> {
             let lanes = lanes & !blocked;
             let blocks = TriData::leaf_blocks(blocks, ranges, *labelled, leaf);
             let hit = packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec);
-            for lane in crate::accel::lanes(hit.into()) {
-                tm[lane] = BLOCKED;
-            }
-            blocked |= hit;
-            hit
+            drop_blocked(hit, tm, &mut blocked)
         });
         Some(blocked)
     }
