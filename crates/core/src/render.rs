@@ -214,18 +214,9 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                                     acc[own].add(&sample, 1.0, aovs);
                                     return;
                                 }
-                                if m == 0 {
-                                    // A filter within the pixel (the box): the sample's own pixel
-                                    // only, as the loops below would weigh it.
-                                    let wx = settings.filter.eval_1d(film.x - (x as f32 + 0.5));
-                                    let wy = settings.filter.eval_1d(film.y - (y as f32 + 0.5));
-                                    if wy != 0.0 && wx * wy != 0.0 {
-                                        acc[own].add(&sample, wx * wy, aovs);
-                                    }
-                                    return;
-                                }
                                 // The filter is separable: one weight per column and per row,
-                                // and only those it reaches are visited.
+                                // and only those it reaches are visited (a filter within the
+                                // pixel, `m` = 0, weighs the sample's own pixel only).
                                 let nc = splat_weights(&settings.filter, film.x, x, m, w, &mut cols);
                                 let nr = splat_weights(&settings.filter, film.y, y, m, h, &mut rows);
                                 for &(py, wy) in &rows[..nr] {

@@ -355,7 +355,7 @@ pub fn sin_cos_f64(x: f64) -> (f64, f64) {
     const PIO2_HI: f64 = 1.570_796_326_734_125_6;
     const PIO2_LO: f64 = 6.077_100_506_506_192e-11;
     // Adding 1.5 · 2^52 rounds to the nearest integer (`round` is a call on the x86-64
-    // baseline); |q| ≤ 11.
+    // baseline); |q| ≤ 10.
     const SHIFTER: f64 = 6_755_399_441_055_744.0;
     let q = (x * std::f64::consts::FRAC_2_PI + SHIFTER) - SHIFTER;
     let r = (x - q * PIO2_HI) - q * PIO2_LO;
