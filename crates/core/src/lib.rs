@@ -22,6 +22,7 @@ pub mod geometry;
 pub mod image;
 pub mod inspect;
 pub mod integrator;
+pub mod lanes;
 pub mod light;
 pub mod material;
 pub mod render;

@@ -6,6 +6,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3, Vec3A};
 
 use crate::geometry::orthonormal_basis;
+use crate::lanes::F64Lanes;
 use crate::sampling::{sample_cdf, uniform_cone, uniform_triangle};
 use crate::shape::{intersect_sphere, Sphere};
 use crate::Rgb;
@@ -306,19 +307,54 @@ impl SphericalRectangle {
     }
 
     /// The point of the rectangle whose direction is the `u`-th in solid angle.
+    #[inline]
     pub fn sample(&self, u: Vec2) -> Vec3 {
-        let (u0, u1) = (u.x as f64, u.y as f64);
-        let au = u0 * self.solid_angle + self.k;
-        let (sin_au, cos_au) = crate::sampling::sin_cos_f64(au);
-        let fu = (cos_au * self.b0 - self.b1) / sin_au;
-        let cu = (1.0 / (fu * fu + self.b0 * self.b0).sqrt()).copysign(fu).clamp(-1.0, 1.0);
-        let xu = (-(cu * self.z0) / (1.0 - cu * cu).max(1e-300).sqrt()).clamp(self.x0, self.x1);
-        let d = (xu * xu + self.z0 * self.z0).sqrt();
-        let h0 = self.y0 / (d * d + self.y0 * self.y0).sqrt();
-        let h1 = self.y1 / (d * d + self.y1 * self.y1).sqrt();
+        let (xu, yv) = self.sample_lanes(u.x as f64, u.y as f64);
+        self.point(xu, yv)
+    }
+
+    /// [`SphericalRectangle::sample`] for two `u`s at once, the same points bit for bit: the
+    /// two chains of double-precision square roots and divisions go side by side in SSE2.
+    #[inline]
+    pub fn sample_pair(&self, u: [Vec2; 2]) -> [Vec3; 2] {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use crate::lanes::F64x2;
+            let (xu, yv) =
+                self.sample_lanes(F64x2::new(u[0].x as f64, u[1].x as f64), F64x2::new(u[0].y as f64, u[1].y as f64));
+            let ([x0, x1], [y0, y1]) = (xu.lanes(), yv.lanes());
+            [self.point(x0, y0), self.point(x1, y1)]
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            u.map(|u| self.sample(u))
+        }
+    }
+
+    /// The rectangle's coordinates `(x, y)` (in its frame at `o`) of the `(u0, u1)`-th
+    /// direction, lane by lane.
+    #[inline(always)]
+    fn sample_lanes<L: F64Lanes>(&self, u0: L, u1: L) -> (L, L) {
+        let k = L::splat;
+        let (b0, z0) = (k(self.b0), k(self.z0));
+        let au = u0 * k(self.solid_angle) + k(self.k);
+        let (sin_au, cos_au) = au.sin_cos();
+        let fu = (cos_au * b0 - k(self.b1)) / sin_au;
+        let cu = (k(1.0) / (fu * fu + b0 * b0).sqrt()).copysign(fu).clamp(k(-1.0), k(1.0));
+        let xu = (-(cu * z0) / (k(1.0) - cu * cu).max_const(1e-300).sqrt()).clamp(k(self.x0), k(self.x1));
+        let d = (xu * xu + z0 * z0).sqrt();
+        let (y0, y1) = (k(self.y0), k(self.y1));
+        let h0 = y0 / (d * d + y0 * y0).sqrt();
+        let h1 = y1 / (d * d + y1 * y1).sqrt();
         let hv = h0 + u1 * (h1 - h0);
         let hv2 = hv * hv;
-        let yv = if hv2 < 1.0 - 1e-12 { (hv * d / (1.0 - hv2).sqrt()).clamp(self.y0, self.y1) } else { self.y1 };
+        let yv = hv2.lt_select(1.0 - 1e-12, (hv * d / (k(1.0) - hv2).sqrt()).clamp(y0, y1), y1);
+        (xu, yv)
+    }
+
+    /// The world-space point at the rectangle's coordinates `(xu, yv)`.
+    #[inline(always)]
+    fn point(&self, xu: f64, yv: f64) -> Vec3 {
         (self.o + self.x * xu + self.y * yv + self.z * self.z0).as_vec3()
     }
 }
@@ -540,15 +576,7 @@ impl AreaLight {
     fn rectangle_sample(&self, p: Vec3, u: Vec2, r: Option<&SphericalRectangle>) -> Option<LightSample> {
         let AreaShape::Rectangle { corner, ex, ey, normal, area } = &self.shape else { return None };
         match r {
-            Some(r) => {
-                let q = r.sample(u);
-                let wi = (q - p).normalize_or_zero();
-                if wi == Vec3::ZERO {
-                    return None;
-                }
-                let pdf = (1.0 / r.solid_angle) as f32;
-                Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
-            }
+            Some(r) => self.spherical_sample(p, r.sample(u), r),
             None => {
                 let q = *corner + *ex * u.x + *ey * u.y;
                 let d = q - p;
@@ -562,6 +590,21 @@ impl AreaLight {
                 Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
             }
         }
+    }
+}
+
+impl AreaLight {
+    /// The sample of this rectangle light whose point `q` was drawn from its spherical
+    /// rectangle `r` seen from `p`.
+    #[inline(always)]
+    fn spherical_sample(&self, p: Vec3, q: Vec3, r: &SphericalRectangle) -> Option<LightSample> {
+        let AreaShape::Rectangle { normal, .. } = &self.shape else { return None };
+        let wi = (q - p).normalize_or_zero();
+        if wi == Vec3::ZERO {
+            return None;
+        }
+        let pdf = (1.0 / r.solid_angle) as f32;
+        Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
     }
 }
 
@@ -606,6 +649,16 @@ impl LightFrom<'_> {
                 a.rectangle_sample(self.p, u, self.rectangle.as_ref())
             }
             light => light.sample(self.p, u),
+        }
+    }
+
+    /// Two samples, those of [`LightFrom::sample`] for `u[0]` and `u[1]`, bit for bit. A
+    /// spherical rectangle draws both at once ([`SphericalRectangle::sample_pair`]).
+    #[inline(always)]
+    pub fn sample_pair(&self, u: [Vec2; 2]) -> [Option<LightSample>; 2] {
+        match (self.light, &self.rectangle) {
+            (Light::Area(a), Some(r)) => r.sample_pair(u).map(|q| a.spherical_sample(self.p, q, r)),
+            _ => [self.sample(u[0]), self.sample(u[1])],
         }
     }
 }
@@ -763,6 +816,55 @@ mod tests {
         }
         // Both regimes of the rectangle and lights that do give samples were exercised.
         assert!(spherical >= 2 && some > 1000, "{spherical} spherical rectangles, {some} samples");
+    }
+
+    #[test]
+    fn spherical_rectangle_pairs_are_its_single_samples() {
+        // Points near and far, on either side, in front of rectangles large and small (some
+        // seen at a grazing angle), and u at the edges of the square: two at a time, the same
+        // points bit for bit, and the same light samples through `LightFrom`.
+        let mut rng = Pcg32::new(11, 12);
+        let mut pairs = 0;
+        for case in 0..400 {
+            let v = |rng: &mut Pcg32, s: f32| (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5) * s;
+            let (corner, ex) = (v(&mut rng, 4.0), v(&mut rng, 3.0));
+            let ey = ex.cross(v(&mut rng, 1.0)).normalize_or_zero() * (0.01 + 2.0 * rng.next_f32());
+            let p = corner + v(&mut rng, if case % 4 == 0 { 40.0 } else { 3.0 });
+            let normal = ex.cross(ey).normalize_or_zero();
+            let Some(r) = SphericalRectangle::new(p, corner, ex, ey) else { continue };
+            let edges = [0.0, 1.0 - f32::EPSILON / 2.0, 0.5];
+            for i in 0..16 {
+                let u = |rng: &mut Pcg32, j: usize| {
+                    if i < 9 {
+                        Vec2::new(edges[(i + j) % 3], edges[(i / 3 + j) % 3])
+                    } else {
+                        rng.next_2d()
+                    }
+                };
+                let us = [u(&mut rng, 0), u(&mut rng, 1)];
+                let got = r.sample_pair(us);
+                for k in 0..2 {
+                    assert_eq!(got[k].to_array().map(f32::to_bits), r.sample(us[k]).to_array().map(f32::to_bits));
+                }
+                let light = Light::Area(AreaLight {
+                    object: 0,
+                    emission: Rgb::ONE,
+                    samples: 2,
+                    shape: AreaShape::rectangle(corner, ex, ey, normal),
+                });
+                let from = light.from_point(p);
+                let two = from.sample_pair(us);
+                for k in 0..2 {
+                    let one = from.sample(us[k]);
+                    assert_eq!(two[k].is_some(), one.is_some());
+                    if let (Some(a), Some(b)) = (two[k], one) {
+                        assert_eq!((a.wi, a.p, a.value, a.pdf.to_bits()), (b.wi, b.p, b.value, b.pdf.to_bits()));
+                    }
+                }
+                pairs += from.rectangle.is_some() as usize;
+            }
+        }
+        assert!(pairs > 1000, "{pairs} pairs drawn from spherical rectangles");
     }
 
     #[test]

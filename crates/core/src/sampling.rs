@@ -5,6 +5,7 @@
 //! its dimensions in a fixed order. Nothing depends on which thread renders which pixel, so an
 //! image is bit-identical whatever the thread count.
 
+use crate::lanes::F64Lanes;
 use glam::{Vec2, Vec3};
 
 /// PCG32 (O'Neill 2014): 64-bit state, 32-bit output.
@@ -341,45 +342,52 @@ pub fn sin_cos_octant(x: f32) -> (f32, f32) {
 }
 
 /// `(sin x, cos x)` in double precision, within 3·10⁻¹⁶ of the true values for `|x| ≤ 16` (the
-/// angles of [`crate::light::SphericalRectangle::sample`], in `[0, 2π]`); beyond, libm's. The
-/// nearest quarter turn is taken out with π/2 in two parts (its first 33 bits, whose multiples
-/// by the quarter count are exact, and the rest), and what is left, at most π/4, goes through
-/// fdlibm's minimax polynomials for `sin` and `cos` on `[−π/4, π/4]`. libm's `sincos` in f64
-/// cost about 140 instructions a call, half of a spherical rectangle's sample.
+/// angles of [`crate::light::SphericalRectangle::sample`], in `[0, 2π]`); beyond, libm's. See
+/// [`sin_cos_reduced`]. libm's `sincos` in f64 cost about 140 instructions a call, half of a
+/// spherical rectangle's sample.
 #[inline]
 pub fn sin_cos_f64(x: f64) -> (f64, f64) {
-    if x.is_nan() || x.abs() > 16.0 {
+    if !x.all_within(SIN_COS_F64_REDUCED) {
         return x.sin_cos();
     }
+    sin_cos_reduced(x)
+}
+
+/// The largest `|x|` that [`sin_cos_reduced`] takes.
+pub const SIN_COS_F64_REDUCED: f64 = 16.0;
+
+/// `(sin x, cos x)` lane by lane for `|x| ≤` [`SIN_COS_F64_REDUCED`] (not NaN). The nearest
+/// quarter turn is taken out with π/2 in two parts (its first 33 bits, whose multiples by the
+/// quarter count are exact, and the rest), and what is left, at most π/4, goes through fdlibm's
+/// minimax polynomials for `sin` and `cos` on `[−π/4, π/4]`.
+#[inline(always)]
+pub fn sin_cos_reduced<L: F64Lanes>(x: L) -> (L, L) {
     // π/2 to 33 bits, and the rest.
     const PIO2_HI: f64 = 1.570_796_326_734_125_6;
     const PIO2_LO: f64 = 6.077_100_506_506_192e-11;
     // Adding 1.5 · 2^52 rounds to the nearest integer (`round` is a call on the x86-64
-    // baseline); |q| ≤ 10.
+    // baseline), which then sits in the low bits of the sum's mantissa; |q| ≤ 10.
     const SHIFTER: f64 = 6_755_399_441_055_744.0;
-    let q = (x * std::f64::consts::FRAC_2_PI + SHIFTER) - SHIFTER;
-    let r = (x - q * PIO2_HI) - q * PIO2_LO;
+    let k = L::splat;
+    let t = x * k(std::f64::consts::FRAC_2_PI) + k(SHIFTER);
+    let q = t - k(SHIFTER);
+    let r = (x - q * k(PIO2_HI)) - q * k(PIO2_LO);
     let z = r * r;
     let s = r + r
         * z
-        * (-1.666_666_666_666_663_2e-1
-            + z * (8.333_333_333_322_49e-3
-                + z * (-1.984_126_982_985_795e-4
-                    + z * (2.755_731_370_707_006_8e-6
-                        + z * (-2.505_076_025_340_686_3e-8 + z * 1.589_690_995_211_55e-10)))));
-    let c = 1.0 - 0.5 * z
+        * (k(-1.666_666_666_666_663_2e-1)
+            + z * (k(8.333_333_333_322_49e-3)
+                + z * (k(-1.984_126_982_985_795e-4)
+                    + z * (k(2.755_731_370_707_006_8e-6)
+                        + z * (k(-2.505_076_025_340_686_3e-8) + z * k(1.589_690_995_211_55e-10))))));
+    let c = k(1.0) - k(0.5) * z
         + z * z
-            * (4.166_666_666_666_66e-2
-                + z * (-1.388_888_888_887_411e-3
-                    + z * (2.480_158_728_947_673e-5
-                        + z * (-2.755_731_435_139_066_3e-7
-                            + z * (2.087_572_321_298_175e-9 + z * -1.135_964_755_778_819_5e-11)))));
-    match q as i64 & 3 {
-        0 => (s, c),
-        1 => (c, -s),
-        2 => (-s, -c),
-        _ => (-c, s),
-    }
+            * (k(4.166_666_666_666_66e-2)
+                + z * (k(-1.388_888_888_887_411e-3)
+                    + z * (k(2.480_158_728_947_673e-5)
+                        + z * (k(-2.755_731_435_139_066_3e-7)
+                            + z * (k(2.087_572_321_298_175e-9) + z * k(-1.135_964_755_778_819_5e-11))))));
+    L::quarter_turns(t, s, c)
 }
 
 /// `atan2(y, x)` in `[−π, π]`, within 3·10⁻⁷ rad of the exact value for finite arguments: the

@@ -281,31 +281,36 @@ impl Whitted {
             // sample order (the same sum, bit for bit, as each traced alone).
             // Made only for a light with several samples (a point light's one would pay for it).
             let mut batch: Option<ShadowBatch> = None;
-            for s in 0..n {
-                let u = strata.sample_in_order(s, li as u32 ^ 0x9e37_79b9, cx.rng);
-                let Some(ls) = from.sample(u) else {
-                    continue;
-                };
-                let ls_wi = Vec3::from(ls.wi);
-                if ls_wi.dot(ng) <= 0.0 {
-                    continue; // Light below the geometric surface.
-                }
-                let f = bsdf.eval(wo_local, frame.to_local(ls_wi));
-                if f.max_element() <= 0.0 || ls.value.max_element() <= 0.0 {
-                    continue;
-                }
-                cx.stats.shadow += 1;
-                if n == 1 {
-                    if !cx.world.shadowed(hit, ng, li, &ls) {
-                        acc += f * Vec3::from(ls.value);
+            // Samples are drawn two at a time (a spherical rectangle draws a pair at once,
+            // `LightFrom::sample_pair`), their strata in order, and used in order: the same
+            // sum as one at a time.
+            let draw = |s: u32, rng: &mut _| strata.sample_in_order(s, li as u32 ^ 0x9e37_79b9, rng);
+            for s in (0..n).step_by(2) {
+                let u = draw(s, cx.rng);
+                let pair = if s + 1 < n { from.sample_pair([u, draw(s + 1, cx.rng)]) } else { [from.sample(u), None] };
+                // By reference: moving the pair into an iterator copied it (`memcpy`).
+                for ls in pair.iter().flatten() {
+                    let ls_wi = Vec3::from(ls.wi);
+                    if ls_wi.dot(ng) <= 0.0 {
+                        continue; // Light below the geometric surface.
                     }
-                    continue;
-                }
-                let (ray, t_max, skip) = cx.world.shadow_ray(hit, ng, li, &ls);
-                let b = batch.get_or_insert_with(ShadowBatch::new);
-                b.push(ray, t_max, skip, f * Vec3::from(ls.value));
-                if b.n == 8 {
-                    b.flush(cx.world, &mut acc);
+                    let f = bsdf.eval(wo_local, frame.to_local(ls_wi));
+                    if f.max_element() <= 0.0 || ls.value.max_element() <= 0.0 {
+                        continue;
+                    }
+                    cx.stats.shadow += 1;
+                    if n == 1 {
+                        if !cx.world.shadowed(hit, ng, li, ls) {
+                            acc += f * Vec3::from(ls.value);
+                        }
+                        continue;
+                    }
+                    let (ray, t_max, skip) = cx.world.shadow_ray(hit, ng, li, ls);
+                    let b = batch.get_or_insert_with(ShadowBatch::new);
+                    b.push(ray, t_max, skip, f * Vec3::from(ls.value));
+                    if b.n == 8 {
+                        b.flush(cx.world, &mut acc);
+                    }
                 }
             }
             if let Some(b) = &mut batch {
