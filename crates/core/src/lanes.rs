@@ -257,7 +257,7 @@ mod tests {
                 let (t, o) = (F64x2::splat(1.0), F64x2::splat(2.0));
                 check(v.lt_select(0.3, t, o), [a.lt_select(0.3, 1.0, 2.0), b.lt_select(0.3, 1.0, 2.0)], "select");
                 let (s, c) = v.sin_cos();
-                let ((sa, ca), (sb, cb)) = (a.sin_cos_lanes(), b.sin_cos_lanes());
+                let ((sa, ca), (sb, cb)) = (F64Lanes::sin_cos(a), F64Lanes::sin_cos(b));
                 check(s, [sa, sb], "sin");
                 check(c, [ca, cb], "cos");
                 assert_eq!(v.all_within(16.0), a.all_within(16.0) && b.all_within(16.0), "within({a}, {b})");
@@ -267,19 +267,9 @@ mod tests {
         for q in -10..=10 {
             let x = q as f64 * std::f64::consts::FRAC_PI_2 + 0.1;
             let (s, c) = F64x2::new(x, -x).sin_cos();
-            let ((sa, ca), (sb, cb)) = (x.sin_cos_lanes(), (-x).sin_cos_lanes());
+            let ((sa, ca), (sb, cb)) = (F64Lanes::sin_cos(x), F64Lanes::sin_cos(-x));
             assert!(same(s.lanes()[0], sa) && same(s.lanes()[1], sb), "sin at quarter turn {q}");
             assert!(same(c.lanes()[0], ca) && same(c.lanes()[1], cb), "cos at quarter turn {q}");
-        }
-    }
-
-    /// The scalar lane's `sin_cos` (a name that does not clash with `f64::sin_cos`).
-    trait SinCosLanes {
-        fn sin_cos_lanes(self) -> (f64, f64);
-    }
-    impl SinCosLanes for f64 {
-        fn sin_cos_lanes(self) -> (f64, f64) {
-            super::F64Lanes::sin_cos(self)
         }
     }
 }

@@ -591,9 +591,7 @@ impl AreaLight {
             }
         }
     }
-}
 
-impl AreaLight {
     /// The sample of this rectangle light whose point `q` was drawn from its spherical
     /// rectangle `r` seen from `p`.
     #[inline(always)]
