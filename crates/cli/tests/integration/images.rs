@@ -638,46 +638,17 @@ fn two_sided_false_makes_the_back_black() {
 #[test]
 fn every_light_sample_is_traced_whatever_their_number() {
     // Whitted draws a light's samples four at a time, the last one to three on their own:
-    // every count from 1 to 9 must trace one shadow ray per sample at every point. A floor
-    // fills the view and a rectangle light above the camera sees all of it: large and near
+    // every count from 1 to 9 must trace one shadow ray per sample at every point. The plane
+    // fills the view and a rectangle light behind the camera sees all of it: large and near
     // (sampled by solid angle, two at a time in SSE2 lanes) or small (sampled by area).
     for (size, offset) in [(4.0f32, -2.0f32), (0.2, -0.1)] {
         for n in 1..=9u32 {
-            let src = format!(
-                r#"
-[render]
-width = 8
-height = 6
-spp = 1
-max_depth = 0
-
-[camera]
-eye = [0, 1, 1]
-look_at = [0, 0, 0]
-fov = 30
-
-[materials.white]
-type = "diffuse"
-albedo = 0.5
-
-[[shapes]]
-type = "quad"
-corner = [-10, 0, -10]
-edge1 = [0, 0, 20]
-edge2 = [20, 0, 0]
-material = "white"
-
-[[shapes]]
-type = "quad"
-corner = [{offset}, 3, {offset}]
-edge1 = [{size}, 0, 0]
-edge2 = [0, 0, {size}]
-material = "white"
-emission = [1, 1, 1]
-light_samples = {n}
-"#
+            let light = format!(
+                "[[shapes]]\ntype = \"quad\"\ncorner = [{offset}, {offset}, 6]\nedge1 = [0, {size}, 0]\n\
+                 edge2 = [{size}, 0, 0]\nmaterial = \"m\"\nemission = [1, 1, 1]\nlight_samples = {n}\n"
             );
-            let (img, s) = render_src(&src, &Opts { width: 8, height: 6, spp: 1, ..Opts::default() });
+            let (img, s) =
+                render_src(&format!("{PLANE}{light}"), &Opts { width: 8, height: 6, spp: 1, ..Opts::default() });
             assert_eq!(s.camera, 48);
             assert_eq!(s.shadow, 48 * n as u64, "light of size {size}, {n} samples");
             assert!(
