@@ -1178,19 +1178,24 @@ impl<'s, A: Accel> World<'s, A> {
             if lanes == 0 {
                 return 0;
             }
+            // The rays of `lanes` against the object one at a time, as `occluded_skipping` tests it.
+            let each = |r4: &mut [Option<Ray4>; 8], tm: &[f32; 8]| {
+                crate::accel::lanes(lanes.into())
+                    .filter(|&i| self.any_in_object(obj, &rays[i], &mut r4[i], tm[i]))
+                    .fold(0u8, |m, i| m | 1 << i)
+            };
             let o = &self.scene.objects[obj as usize];
             let hit = match (self.direct_blocks(obj), &o.transform, &self.scene.geometries[o.geometry]) {
                 (Some(blocks), _, _) => packet.closest_in_blocks(rays, active, self.avx2, blocks, lanes, tm, &mut rec),
-                // A transformed mesh: its rays taken into its space and tested together there.
+                // A transformed mesh: its rays taken into its space and tested together there
+                // (one at a time where its triangles are not in blocks).
                 (None, Some(x), Geometry::Mesh(_)) if lanes.count_ones() >= 2 => {
                     let local = rays.map(|r| x.ray_to_object(&r));
                     let mut local_t = *tm;
                     self.any_packet_in_mesh(o.geometry, &local, lanes, &mut local_t, &mut PacketRays::default())
-                        .unwrap_or(0)
+                        .unwrap_or_else(|| each(&mut packet.r4, tm))
                 }
-                _ => crate::accel::lanes(lanes.into())
-                    .filter(|&i| self.any_in_object(obj, &rays[i], &mut packet.r4[i], tm[i]))
-                    .fold(0u8, |m, i| m | 1 << i),
+                _ => each(&mut packet.r4, tm),
             };
             drop_blocked(hit, tm, &mut blocked)
         });
