@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Ray throughput against Embree 3 on the same rays, measured in one run (the speed issue's
-# tracing targets): for each mesh (bunny, displaced icosphere, dragon), Embree's benchmark
+# tracing targets): for each mesh (bunny, the displaced icosphere at subdivision 6 and at the
+# issue's subdivision 8, dragon; MESHES picks some of bunny ico ico8 dragon), Embree's benchmark
 # (quality high and medium, AVX2, 2 threads, single rays and packets), then each Snell binary
 # (`snell bench --rays`, the default accelerator), then Embree again; ROUNDS (default 1) times
 # Snell then Embree, on a machine whose speed drifts from one run to the next.
@@ -19,6 +20,7 @@ TOOLS="$SCENES/../bench"
 WORK="${WORK:-/tmp/snell-embree}"
 REPS="${REPS:-5}"
 ROUNDS="${ROUNDS:-1}"
+MESHES="${MESHES:-bunny ico ico8 dragon}"
 mkdir -p "$WORK"
 # WORK's contents belong to the tools that made them: when ../shared/bench changes, they are
 # made again.
@@ -29,12 +31,14 @@ fi
 [ -x "$WORK/embree_bench" ] || bash "$TOOLS/build_embree_bench.sh" "$WORK" >&2
 echo "$stamp" > "$WORK/tools.stamp"
 
-for mesh in bunny ico dragon; do
+for mesh in $MESHES; do
     if [ ! -f "$WORK/$mesh.bin" ]; then
         case $mesh in
             bunny) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/stanford/bunny.ply" --out "$WORK/bunny" ;;
             dragon) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/stanford/dragon_vrip.ply" --out "$WORK/dragon" ;;
             ico) python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 6 --displace --out "$WORK/ico" ;;
+            ico8) python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 8 --displace --out "$WORK/ico8" ;;
+            *) echo "unknown mesh $mesh (MESHES: bunny ico ico8 dragon)" >&2; exit 2 ;;
         esac >&2
     fi
     if [ ! -f "$WORK/${mesh}_bounce.f32" ]; then
@@ -88,6 +92,6 @@ for k, b in enumerate(bins):
               f"{med(sn) / med(em):.2f}x   hits {s[0][name]['hits']}")
     want = (int(runs[0][("high", "intersect1", "primary")]["extra"]), int(runs[0][("high", "occluded1", "diffuse_bounce")]["checksum"]))
     got = {(x["primary"]["hits"], x["bounce"]["hits"]) for x in s}
-    print(f"     hits (primary, bounce): {sorted(got)}, Embree {want}" + ("" if got == {want} else "  <-- DIFFERENT"))
+    print(f"     hits (primary, bounce): {sorted(got)}, Embree {want}" + ("" if got == {want} else "  <-- DIFFERENT: settle each such ray with bench/exact_hit.py"))
 PY
 done
