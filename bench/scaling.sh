@@ -2,7 +2,7 @@
 # Two threads against one (the speed issue's scaling target, 1.9x for tracing and rendering),
 # measured so that both sides share the machine's drift:
 # - tracing: `snell bench MESH --threads 1,2` (the two thread counts alternated round by round
-#   inside one process) on the bunny, the displaced icosphere and the dragon;
+#   inside one process) on the bunny, the displaced icosphere (subdivision 6 and 8) and the dragon;
 # - building: `snell bench MESH --threads 1` and `--threads 2` as processes of their own,
 #   alternated ROUNDS times (a build of 10 ms, timed while another thread count's pool is alive
 #   in the same process, came out 20-60 % slower on two threads than alone: 12-15 against
@@ -13,7 +13,7 @@
 #   bench/scaling.sh [SNELL_BINARY]
 #
 # Default binary: target/release/snell (brought up to date first). WORK (default
-# /tmp/snell-embree, shared with vs_embree.sh) keeps the icosphere (mesh_tools.py needs numpy).
+# /tmp/snell-embree, shared with vs_embree.sh) keeps the icospheres (mesh_tools.py needs numpy).
 # Prints per workload the median one- and two-thread figures and their ratio.
 source "$(dirname "$0")/common.sh" "$@"
 bin="${bins[0]}"
@@ -24,11 +24,12 @@ SPP="${SPP:-64}"
 ROUNDS="${ROUNDS:-3}"
 mkdir -p "$WORK"
 [ -f "$WORK/ico.ply" ] || python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 6 --displace --out "$WORK/ico" >&2
+[ -f "$WORK/ico8.ply" ] || python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 8 --displace --out "$WORK/ico8" >&2
 
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
-for mesh in "$SCENES/stanford/bunny.ply" "$WORK/ico.ply" "$SCENES/stanford/dragon_vrip.ply"; do
+for mesh in "$SCENES/stanford/bunny.ply" "$WORK/ico.ply" "$WORK/ico8.ply" "$SCENES/stanford/dragon_vrip.ply"; do
     [ -f "$mesh" ] || { echo "missing $mesh" >&2; exit 1; }
     "$bin" bench "$mesh" --threads 1,2 --reps "$REPS" --json > "$tmp/bench.json"
     # The build: each thread count in a process of its own (a tiny ray workload, as only the
