@@ -21,6 +21,12 @@ WORK="${WORK:-/tmp/snell-embree}"
 REPS="${REPS:-5}"
 ROUNDS="${ROUNDS:-1}"
 MESHES="${MESHES:-bunny ico ico8 dragon}"
+for mesh in $MESHES; do
+    case $mesh in
+        bunny | ico | ico8 | dragon) ;;
+        *) echo "unknown mesh $mesh (MESHES: some of bunny ico ico8 dragon)" >&2; exit 2 ;;
+    esac
+done
 mkdir -p "$WORK"
 # WORK's contents belong to the tools that made them: when ../shared/bench changes, they are
 # made again.
@@ -38,7 +44,6 @@ for mesh in $MESHES; do
             dragon) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/stanford/dragon_vrip.ply" --out "$WORK/dragon" ;;
             ico) python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 6 --displace --out "$WORK/ico" ;;
             ico8) python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 8 --displace --out "$WORK/ico8" ;;
-            *) echo "unknown mesh $mesh (MESHES: bunny ico ico8 dragon)" >&2; exit 2 ;;
         esac >&2
     fi
     if [ ! -f "$WORK/${mesh}_bounce.f32" ]; then
