@@ -2,7 +2,7 @@
 # Two threads against one (the speed issue's scaling target, 1.9x for tracing and rendering),
 # measured so that both sides share the machine's drift:
 # - tracing: `snell bench MESH --threads 1,2` (the two thread counts alternated round by round
-#   inside one process) on the bunny, the displaced icosphere (subdivision 6 and 8) and the dragon;
+#   inside one process) on the bunny, the displaced icosphere (subdivision 6 and 8), the dragon and Spot;
 # - building: `snell bench MESH --threads 1` and `--threads 2` as processes of their own,
 #   alternated ROUNDS times (a build of 10 ms, timed while another thread count's pool is alive
 #   in the same process, came out 20-60 % slower on two threads than alone: 12-15 against
@@ -29,7 +29,7 @@ mkdir -p "$WORK"
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
-for mesh in "$SCENES/stanford/bunny.ply" "$WORK/ico.ply" "$WORK/ico8.ply" "$SCENES/stanford/dragon_vrip.ply"; do
+for mesh in "$SCENES/stanford/bunny.ply" "$WORK/ico.ply" "$WORK/ico8.ply" "$SCENES/stanford/dragon_vrip.ply" "$SCENES/misc/spot.obj"; do
     [ -f "$mesh" ] || { echo "missing $mesh" >&2; exit 1; }
     "$bin" bench "$mesh" --threads 1,2 --reps "$REPS" --json > "$tmp/bench.json"
     # The build: each thread count in a process of its own (a tiny ray workload, as only the

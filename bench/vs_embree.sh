@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Ray throughput against Embree 3 on the same rays, measured in one run (the speed issue's
 # tracing targets): for each mesh (bunny, the displaced icosphere at subdivision 6 and at the
-# issue's subdivision 8, dragon; MESHES picks some of bunny ico ico8 dragon), Embree's benchmark
+# issue's subdivision 8, dragon, and Spot, one more closed mesh; MESHES picks some of bunny ico
+# ico8 dragon spot), Embree's benchmark
 # (quality high and medium, AVX2, 2 threads, single rays and packets), then each Snell binary
 # (`snell bench --rays`, the default accelerator), then Embree again; ROUNDS (default 1) times
 # Snell then Embree, on a machine whose speed drifts from one run to the next.
@@ -20,11 +21,11 @@ TOOLS="$SCENES/../bench"
 WORK="${WORK:-/tmp/snell-embree}"
 REPS="${REPS:-5}"
 ROUNDS="${ROUNDS:-1}"
-MESHES="${MESHES:-bunny ico ico8 dragon}"
+MESHES="${MESHES:-bunny ico ico8 dragon spot}"
 for mesh in $MESHES; do
     case $mesh in
-        bunny | ico | ico8 | dragon) ;;
-        *) echo "unknown mesh $mesh (MESHES: some of bunny ico ico8 dragon)" >&2; exit 2 ;;
+        bunny | ico | ico8 | dragon | spot) ;;
+        *) echo "unknown mesh $mesh (MESHES: some of bunny ico ico8 dragon spot)" >&2; exit 2 ;;
     esac
 done
 mkdir -p "$WORK"
@@ -42,6 +43,7 @@ for mesh in $MESHES; do
         case $mesh in
             bunny) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/stanford/bunny.ply" --out "$WORK/bunny" ;;
             dragon) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/stanford/dragon_vrip.ply" --out "$WORK/dragon" ;;
+            spot) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/misc/spot.obj" --out "$WORK/spot" ;;
             ico) python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 6 --displace --out "$WORK/ico" ;;
             ico8) python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 8 --displace --out "$WORK/ico8" ;;
         esac >&2
