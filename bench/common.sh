@@ -17,6 +17,25 @@ SCENES="${SNELL_SCENES:-$(cd .. && pwd)/shared/scenes}"
 # under a constant environment (which find the shared meshes through their `scenes` parameter).
 render_scenes=("$SCENES/cornell-box/cbox-rgb.xml" bench/scenes/bunny-env.xml bench/scenes/dragon-env.xml)
 
+# The meshes the tracing comparisons measure, by name (the speed issue's icosphere is ico8).
+bench_meshes="bunny ico ico8 dragon spot"
+
+# make_mesh NAME: NAME.bin (Embree's benchmark reads it) and NAME.ply (`snell bench` reads it)
+# in WORK, made with ../shared/bench/mesh_tools.py unless they are there; fails on a name not in
+# `bench_meshes`.
+make_mesh() {
+    local tools="$SCENES/../bench"
+    [ -f "$WORK/$1.bin" ] && [ -f "$WORK/$1.ply" ] && return 0
+    case $1 in
+        bunny) python3 "$tools/mesh_tools.py" convert "$SCENES/stanford/bunny.ply" --out "$WORK/bunny" ;;
+        dragon) python3 "$tools/mesh_tools.py" convert "$SCENES/stanford/dragon_vrip.ply" --out "$WORK/dragon" ;;
+        spot) python3 "$tools/mesh_tools.py" convert "$SCENES/misc/spot.obj" --out "$WORK/spot" ;;
+        ico) python3 "$tools/mesh_tools.py" icosphere --subdiv 6 --displace --out "$WORK/ico" ;;
+        ico8) python3 "$tools/mesh_tools.py" icosphere --subdiv 8 --displace --out "$WORK/ico8" ;;
+        *) echo "unknown mesh $1 (one of: $bench_meshes)" >&2; return 2 ;;
+    esac >&2
+}
+
 # The median of the numbers on standard input, one per line.
 median() { sort -n | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR+1)/2] : (a[NR/2] + a[NR/2+1]) / 2}'; }
 

@@ -4,41 +4,35 @@
     python3 bench/exact_hit.py MESH.ply RAYS.f32 INDEX
 
 For settling a difference between Snell's hit counts and Embree's (`bench/vs_embree.sh`
-flags one): MESH is the binary PLY both programs read (`mesh_tools.py` writes it), RAYS a
-dumped ray file (six float32 per ray: origin, direction), INDEX the ray in question. The
+flags one): MESH is the mesh both programs read (`WORK/NAME.ply` or `.bin`, which
+`mesh_tools.py` writes; it reads them here too, from SNELL_SCENES/../bench, by default
+../shared/bench beside the checkout), RAYS a dumped ray file (six float32 per ray: origin,
+direction), INDEX the ray in question. The
 float32 inputs are taken as exact rationals; every triangle that the ray could touch (a
 float64 pre-filter with a generous tolerance) is tested exactly: the three edge
 functions d . ((a - o) x (b - o)), and the distance to the triangle's plane. A triangle is
 crossed where the three signs agree or are zero. Prints each candidate and the nearest
 crossing with t > 0 (or that there is none). Needs numpy.
 """
+import os
 import sys
 from fractions import Fraction
 
 import numpy as np
 
-
-def read_ply(path):
-    data = open(path, "rb").read()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").split("\n")
-    if "format binary_little_endian 1.0" not in header:
-        sys.exit(f"{path}: only binary little-endian PLY (as mesh_tools.py writes it) is read")
-    counts = {w[1]: int(w[2]) for w in (line.split() for line in header) if w and w[0] == "element"}
-    nv, nf = counts["vertex"], counts["face"]
-    if "property float x" not in header or "property list uchar int vertex_indices" not in header:
-        sys.exit(f"{path}: expected float x y z vertices and uchar/int face lists")
-    v = np.frombuffer(data, dtype="<f4", count=nv * 3, offset=end).reshape(-1, 3)
-    faces = np.frombuffer(data, dtype=np.dtype([("n", "u1"), ("i", "<i4", (3,))]), count=nf, offset=end + nv * 12)
-    if np.any(faces["n"] != 3):
-        sys.exit(f"{path}: only triangles are read")
-    return v, faces["i"]
+HERE = os.path.dirname(os.path.abspath(__file__))
+SCENES = os.environ.get("SNELL_SCENES", os.path.join(HERE, "..", "..", "shared", "scenes"))
+sys.path.insert(0, os.path.join(SCENES, "..", "bench"))
+try:
+    import mesh_tools
+except ImportError:
+    sys.exit(f"mesh_tools.py not found in {os.path.join(SCENES, '..', 'bench')} (set SNELL_SCENES)")
 
 
 def main():
     if len(sys.argv) != 4:
         sys.exit(__doc__.split("\n\n")[1])
-    v, idx = read_ply(sys.argv[1])
+    v, idx = mesh_tools.read_any(sys.argv[1])
     rays = np.fromfile(sys.argv[2], dtype="<f4").reshape(-1, 6)
     i = int(sys.argv[3])
     if not 0 <= i < len(rays):

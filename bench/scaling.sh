@@ -17,14 +17,13 @@
 # Prints per workload the median one- and two-thread figures and their ratio.
 source "$(dirname "$0")/common.sh" "$@"
 bin="${bins[0]}"
-TOOLS="$SCENES/../bench"
 WORK="${WORK:-/tmp/snell-embree}"
 REPS="${REPS:-9}"
 SPP="${SPP:-64}"
 ROUNDS="${ROUNDS:-3}"
 mkdir -p "$WORK"
-[ -f "$WORK/ico.ply" ] || python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 6 --displace --out "$WORK/ico" >&2
-[ -f "$WORK/ico8.ply" ] || python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 8 --displace --out "$WORK/ico8" >&2
+make_mesh ico
+make_mesh ico8
 
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT

@@ -21,12 +21,9 @@ TOOLS="$SCENES/../bench"
 WORK="${WORK:-/tmp/snell-embree}"
 REPS="${REPS:-5}"
 ROUNDS="${ROUNDS:-1}"
-MESHES="${MESHES:-bunny ico ico8 dragon spot}"
+MESHES="${MESHES:-$bench_meshes}"
 for mesh in $MESHES; do
-    case $mesh in
-        bunny | ico | ico8 | dragon | spot) ;;
-        *) echo "unknown mesh $mesh (MESHES: some of bunny ico ico8 dragon spot)" >&2; exit 2 ;;
-    esac
+    [[ " $bench_meshes " == *" $mesh "* ]] || { echo "unknown mesh $mesh (MESHES: some of $bench_meshes)" >&2; exit 2; }
 done
 mkdir -p "$WORK"
 # WORK's contents belong to the tools that made them: when ../shared/bench changes, they are
@@ -39,15 +36,7 @@ fi
 echo "$stamp" > "$WORK/tools.stamp"
 
 for mesh in $MESHES; do
-    if [ ! -f "$WORK/$mesh.bin" ]; then
-        case $mesh in
-            bunny) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/stanford/bunny.ply" --out "$WORK/bunny" ;;
-            dragon) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/stanford/dragon_vrip.ply" --out "$WORK/dragon" ;;
-            spot) python3 "$TOOLS/mesh_tools.py" convert "$SCENES/misc/spot.obj" --out "$WORK/spot" ;;
-            ico) python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 6 --displace --out "$WORK/ico" ;;
-            ico8) python3 "$TOOLS/mesh_tools.py" icosphere --subdiv 8 --displace --out "$WORK/ico8" ;;
-        esac >&2
-    fi
+    make_mesh "$mesh"
     if [ ! -f "$WORK/${mesh}_bounce.f32" ]; then
         "$WORK/embree_bench" "$WORK/$mesh.bin" --quality high --threads 2 --isa avx2 --no-packets --reps 1 \
             --dump-rays "$WORK/$mesh" > /dev/null
