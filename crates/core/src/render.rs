@@ -276,7 +276,7 @@ const CHUNK: usize = 32;
 /// arrays cost up to 27 % at 8 samples a pixel. Only the entries of the samples being traced
 /// are read.
 struct CameraPackets {
-    samplers: [Option<Sampler>; CHUNK],
+    samplers: [Sampler; CHUNK],
     film: [[Vec2; 8]; CHUNK / 8],
     lens: [[Vec2; 8]; CHUNK / 8],
     rays: [[Ray; 8]; CHUNK / 8],
@@ -286,7 +286,7 @@ struct CameraPackets {
 impl CameraPackets {
     fn new() -> CameraPackets {
         CameraPackets {
-            samplers: std::array::from_fn(|_| None),
+            samplers: std::array::from_fn(|_| Sampler::new(SamplerKind::Independent, 0, 0, 0, 1)),
             film: [[Vec2::ZERO; 8]; CHUNK / 8],
             lens: [[Vec2::ZERO; 8]; CHUNK / 8],
             rays: [[Ray::new(Vec3::ZERO, Vec3::Z); 8]; CHUNK / 8],
@@ -321,7 +321,7 @@ fn render_pixel<A: Accel, I: Integrator>(
         let n = (s.spp - first).min(CHUNK as u32) as usize;
         for k in 0..n {
             let (sampler, f, l) = camera_film(world, s, strata, x, y, pixel, key, first + k as u32);
-            (samplers[k], film[k / 8][k % 8], lens[k / 8][k % 8]) = (Some(sampler), f, l);
+            (samplers[k], film[k / 8][k % 8], lens[k / 8][k % 8]) = (sampler, f, l);
         }
         // Eight rays at once (`Camera::rays8`, the same rays as one at a time); lanes past
         // the pixel's last sample repeat its first and are not traced.
@@ -340,28 +340,33 @@ fn render_pixel<A: Accel, I: Integrator>(
         } else {
             world.hit_packets(rays, active, hits);
         }
-        for (k, slot) in samplers.iter_mut().enumerate().take(n) {
-            let Some(sampler) = slot else { break };
-            // The ray is read where it lies: a copy made here, just before it is read, would be
-            // written in pieces and read whole (a store-forwarding stall).
-            let (film, ray) = (film[k / 8][k % 8], &rays[k / 8][k % 8]);
-            let hit = hits[k / 8][k % 8].as_ref().map(|h| world.interaction(ray, h));
-            stats.camera += 1;
-            let mut sample = Accum::default();
+        for g in 0..n.div_ceil(8) {
+            let m = (n - 8 * g).min(8);
+            let (film, rays) = (&film[g], &rays[g]);
+            let firsts: [_; 8] =
+                std::array::from_fn(|i| hits[g][i].as_ref().filter(|_| i < m).map(|h| world.interaction(&rays[i], h)));
+            stats.camera += m as u64;
+            let mut samples = [Accum::default(); 8];
             if s.aovs {
-                if let Some(hit) = &hit {
-                    let o = &world.scene.objects[hit.object as usize];
-                    sample.albedo = world.scene.materials[o.material].albedo(hit.uv);
-                    sample.normal = if hit.ns.dot(ray.d) > 0.0 { -hit.ns } else { hit.ns };
-                    sample.depth = hit.t * ray.d.length();
+                for (i, sample) in samples.iter_mut().enumerate().take(m) {
+                    if let Some(hit) = &firsts[i] {
+                        let (o, ray) = (&world.scene.objects[hit.object as usize], &rays[i]);
+                        sample.albedo = world.scene.materials[o.material].albedo(hit.uv);
+                        sample.normal = if hit.ns.dot(ray.d) > 0.0 { -hit.ns } else { hit.ns };
+                        sample.depth = hit.t * ray.d.length();
+                    }
                 }
             }
-            // Tested in 16-byte lanes, as the path tracer sums (see `Path::radiance`).
-            let l = glam::Vec3A::from(integrator.radiance(world, ray, hit, sampler, stats));
-            // A non-finite sample (NaN from a degenerate configuration) would poison the pixel;
-            // it still counts (as black), so that the estimate stays unbiased where it is finite.
-            sample.l = if l.is_finite() { l.into() } else { Rgb::ZERO };
-            sink(film, sample);
+            let ls = integrator.radiance8(world, rays, firsts, &mut samplers[8 * g..8 * g + m], stats);
+            for (i, mut sample) in samples.into_iter().enumerate().take(m) {
+                // Tested in 16-byte lanes, as the path tracer sums (see `Path::radiance`).
+                let l = glam::Vec3A::from(ls[i]);
+                // A non-finite sample (NaN from a degenerate configuration) would poison the
+                // pixel; it still counts (as black), so that the estimate stays unbiased where
+                // it is finite.
+                sample.l = if l.is_finite() { l.into() } else { Rgb::ZERO };
+                sink(film[i], sample);
+            }
         }
     }
 }
@@ -412,8 +417,10 @@ mod tests {
     use super::*;
     use crate::accel::{AccelKind, AccelParams};
     use crate::camera::{Camera, Projection};
+    use crate::geometry::Transform;
     use crate::integrator::Path;
     use crate::light::{Environment, Light};
+    use crate::material::microfacet::Distribution;
     use crate::material::{Material, Texture};
     use crate::scene::{Geometry, LightSelection, Object, Scene};
     use crate::shape::Mesh;
@@ -449,7 +456,6 @@ mod tests {
     }
 
     fn packets_match_single_rays(camera: Camera, spp: u32, reconstruction: Reconstruction, filter: Filter) {
-        let scene = lit_sphere(camera);
         let settings = RenderSettings {
             width: 12,
             height: 10,
@@ -459,10 +465,35 @@ mod tests {
             filter,
             ..RenderSettings::default()
         };
-        let integrator = Path { max_depth: 4, rr_depth: 2 };
+        renders_match_single_paths(lit_sphere(camera), &settings, Path { max_depth: 4, rr_depth: 2 });
+    }
+
+    /// The paths of a packet's samples run in lockstep (`Path::radiance8`, Lambertian vertices
+    /// in vector lanes where the CPU has them) give exactly what each sample's path gives alone
+    /// (`Path::radiance`): a scene of diffuse, rough metal, glass and one-sided surfaces lit by
+    /// a rectangle, a sphere light, a point light and the sky, with Russian roulette from the
+    /// second bounce; partial packets and full ones, both samplers.
+    #[test]
+    fn paths_in_lockstep_render_what_single_paths_render() {
+        let camera =
+            Camera::look_at(Vec3::new(0.3, 0.9, 3.5), Vec3::ZERO, Vec3::Y, Projection::Perspective { fov_y: 50.0 })
+                .unwrap();
+        for (spp, sampler) in [(5, SamplerKind::Independent), (37, SamplerKind::Independent), (16, SamplerKind::Sobol)]
+        {
+            let settings =
+                RenderSettings { width: 12, height: 10, spp, threads: 1, sampler, ..RenderSettings::default() };
+            renders_match_single_paths(mixed_scene(camera), &settings, Path { max_depth: 6, rr_depth: 2 });
+        }
+    }
+
+    /// Renders `scene` and checks every pixel against the average of its samples' radiance,
+    /// each path traced alone.
+    fn renders_match_single_paths(scene: Scene, settings: &RenderSettings, integrator: Path) {
+        let camera = scene.camera;
+        let spp = settings.spp;
         let world = AccelKind::DEFAULT.build_world(&scene, &AccelParams::default());
         crate::with_world!(&world, w => {
-            let (image, _) = render(w, &integrator, &settings, &|_| {});
+            let (image, _) = render(w, &integrator, settings, &|_| {});
             let mut lit = 0;
             for y in 0..settings.height {
                 for x in 0..settings.width {
@@ -470,7 +501,7 @@ mod tests {
                     let key = (crate::sampling::mix64(settings.seed ^ pixel) >> 32) as u32;
                     let (mut sum, mut n) = (Rgb::ZERO, 0.0f32);
                     for i in 0..settings.spp {
-                        let (mut sampler, film, lens) = camera_film(w, &settings, &Strata::new(settings.spp), x, y, pixel, key, i);
+                        let (mut sampler, film, lens) = camera_film(w, settings, &Strata::new(settings.spp), x, y, pixel, key, i);
                         let ray = w.scene.camera.ray(film, settings.width, settings.height, lens);
                         let hit = w.intersect(&ray, f32::INFINITY);
                         lit += usize::from(hit.is_some());
@@ -542,6 +573,55 @@ mod tests {
             }
             assert!(reached > width * height / 4, "{reached} pixels lit");
         });
+    }
+
+    /// A diffuse icosphere on a diffuse floor between a rough gold sphere and a glass one,
+    /// under a downward-facing square light, a sphere light, a point light and a dim sky.
+    fn mixed_scene(camera: Camera) -> Scene {
+        let at = |x: f32, y: f32, z: f32, scale: f32| {
+            Transform::try_new(glam::Affine3A::from_scale_rotation_translation(
+                Vec3::splat(scale),
+                glam::Quat::IDENTITY,
+                Vec3::new(x, y, z),
+            ))
+        };
+        let object = |geometry, transform, material, emission| Object {
+            geometry,
+            transform,
+            material,
+            emission,
+            light_samples: 1,
+        };
+        let constant = |r, g, b| Texture::Constant(Rgb::new(r, g, b));
+        let mut scene = lit_sphere(camera);
+        scene.geometries.extend([
+            Geometry::Mesh(Mesh::quad(Vec3::new(-4.0, -1.0, 4.0), Vec3::new(8.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -8.0))),
+            Geometry::Mesh(Mesh::quad(Vec3::new(-0.5, 2.0, -0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0))),
+            Geometry::Sphere(crate::shape::Sphere { center: Vec3::new(-1.0, 1.2, 0.8), radius: 0.2 }),
+        ]);
+        scene.materials.extend([
+            Material::Diffuse { albedo: constant(0.5, 0.5, 0.4) },
+            Material::Conductor {
+                eta: Rgb::new(0.143, 0.375, 1.442),
+                k: Rgb::new(3.983, 2.386, 1.603),
+                roughness: 0.3,
+                distribution: Distribution::Ggx,
+            },
+            Material::Dielectric { ior: 1.5, transmittance: Rgb::ONE, roughness: 0.0, distribution: Distribution::Ggx },
+            Material::OneSided(Box::new(Material::Diffuse { albedo: constant(0.8, 0.8, 0.8) })),
+        ]);
+        scene.objects.extend([
+            object(1, None, 1, Rgb::ZERO),
+            object(2, None, 4, Rgb::splat(6.0)),
+            object(3, None, 4, Rgb::new(4.0, 3.0, 2.0)),
+            object(0, at(1.4, -0.5, 0.3, 0.5), 2, Rgb::ZERO),
+            object(0, at(-1.3, -0.4, 0.2, 0.6), 3, Rgb::ZERO),
+        ]);
+        scene.lights.push(Light::Point { position: Vec3::new(2.0, 2.5, 2.0), intensity: Rgb::splat(3.0) });
+        if let Light::Environment(sky) = &mut scene.lights[0] {
+            sky.scale = Rgb::splat(0.2);
+        }
+        scene
     }
 
     /// A diffuse icosphere under a white sky, seen by `camera`.

@@ -634,8 +634,9 @@ pub struct World<'s, A: Accel> {
     light_object: Vec<u32>,
     /// The index of the environment light in `lights`, if there is one.
     environment: Option<usize>,
-    /// Whether this CPU has AVX2, for the packets' eight-ray triangle test.
-    avx2: bool,
+    /// Whether this CPU has AVX2, for the packets' eight-ray triangle test and the path
+    /// tracer's eight-lane vertices.
+    pub(crate) avx2: bool,
     /// Whether [`World::hit_packet8`] traces its rays together (worked out once, when the
     /// world is built); otherwise it traces them one by one.
     packets: bool,
@@ -836,12 +837,20 @@ impl<'s, A: Accel> World<'s, A> {
         }
         let (q, nq) = (Vec3::from(ls.p), Vec3::from(ls.n));
         let (r, t_max) = spawn_ray_to(hit.p, ng, q, nq);
-        let mut skip = self.leaving(hit.object, hit.p, ng, r.d);
+        (r, t_max, self.shadow_skip(hit.object, hit.p, ng, light, q, nq, r.d))
+    }
+
+    /// What the shadow ray `d` from `p` on object `obj` (geometric normal `ng`) to the point
+    /// `q` (normal `nq`) of light `light` passes over: see [`World::shadowed`].
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub(crate) fn shadow_skip(&self, obj: u32, p: Vec3, ng: Vec3, light: usize, q: Vec3, nq: Vec3, d: Vec3) -> Skip {
+        let mut skip = self.leaving(obj, p, ng, d);
         let at = self.light_object[light];
         if at != NO_OBJECT {
-            skip = skip.and(self.leaving(at, q, nq, -r.d));
+            skip = skip.and(self.leaving(at, q, nq, -d));
         }
-        (r, t_max, skip)
+        skip
     }
 
     /// The area light of an object, if it emits.

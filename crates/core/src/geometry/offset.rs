@@ -12,13 +12,18 @@ const ORIGIN: f32 = 1.0 / 32.0;
 const FLOAT_SCALE: f32 = 1.0 / 65536.0;
 const INT_SCALE: f32 = 256.0;
 
-#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
-#[inline]
+#[inline(always)]
 fn offset_component(p: f32, n: f32) -> f32 {
     if p.abs() < ORIGIN {
         return p + FLOAT_SCALE * n;
     }
-    let of_i = (INT_SCALE * n) as i32;
+    // `as i32` for every |256 n| below 10⁹ (a unit normal's is at most 256), written so that a
+    // loop over rays can convert in vector lanes (Rust's saturating `as` stays scalar there).
+    // NaN becomes -10⁹ (`as` would give 0): a NaN normal's offset is meaningless either way.
+    // SAFETY: `max` turns NaN into its bound, so the value lies in ±10⁹, within `i32`.
+    // (Not `clamp`, which keeps NaN.)
+    #[allow(clippy::manual_clamp)]
+    let of_i = unsafe { (INT_SCALE * n).max(-1e9).min(1e9).to_int_unchecked::<i32>() };
     let bits = p.to_bits() as i32;
     let moved = if p < 0.0 { bits - of_i } else { bits + of_i };
     f32::from_bits(moved as u32)
@@ -34,8 +39,21 @@ pub fn offset_ray_origin(p: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
-        Vec3::new(offset_component(p.x, n.x), offset_component(p.y, n.y), offset_component(p.z, n.z))
+        offset_components(p, n)
     }
+}
+
+/// [`offset_ray_origin`] axis by axis in plain arithmetic (the same bits for finite input):
+/// for loops over several rays, which the compiler runs in vector lanes across the rays.
+#[inline(always)]
+pub fn offset_ray_origin_lanewise(p: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
+    let n = if ng.dot(w) < 0.0 { -ng } else { ng };
+    offset_components(p, n)
+}
+
+#[inline(always)]
+fn offset_components(p: Vec3, n: Vec3) -> Vec3 {
+    Vec3::new(offset_component(p.x, n.x), offset_component(p.y, n.y), offset_component(p.z, n.z))
 }
 
 /// [`offset_component`] on the three axes at once in SSE2 lanes: the same arithmetic (the
@@ -73,8 +91,19 @@ pub fn spawn_ray(p: Vec3, ng: Vec3, d: Vec3) -> Ray {
 /// the largest `t` that a shadow test should consider.
 #[inline]
 pub fn spawn_ray_to(p: Vec3, ng: Vec3, q: Vec3, nq: Vec3) -> (Ray, f32) {
-    let o = offset_ray_origin(p, ng, q - p);
-    let target = if nq == Vec3::ZERO { q } else { offset_ray_origin(q, nq, o - q) };
+    spawn_ray_to_with(p, ng, q, nq, offset_ray_origin)
+}
+
+/// [`spawn_ray_to`] with [`offset_ray_origin_lanewise`], for loops over several rays.
+#[inline(always)]
+pub fn spawn_ray_to_lanewise(p: Vec3, ng: Vec3, q: Vec3, nq: Vec3) -> (Ray, f32) {
+    spawn_ray_to_with(p, ng, q, nq, offset_ray_origin_lanewise)
+}
+
+#[inline(always)]
+fn spawn_ray_to_with(p: Vec3, ng: Vec3, q: Vec3, nq: Vec3, offset: impl Fn(Vec3, Vec3, Vec3) -> Vec3) -> (Ray, f32) {
+    let o = offset(p, ng, q - p);
+    let target = if nq == Vec3::ZERO { q } else { offset(q, nq, o - q) };
     (Ray::new(o, target - o), 1.0 - 1e-4)
 }
 
@@ -93,8 +122,8 @@ mod tests {
         }
     }
 
-    /// The three-lane offset gives the scalar one's bits, near the origin and far from it, on
-    /// both sides of zero.
+    /// The three-lane offset gives the axis-by-axis one's bits, near the origin and far from it,
+    /// on both sides of zero.
     #[test]
     fn lanes_match_the_scalar_offset() {
         let mut rng = crate::sampling::Pcg32::new(3, 5);
@@ -104,8 +133,13 @@ mod tests {
             let p = Vec3::new(c(), c(), c());
             let n = Vec3::new(c(), c(), c()).normalize_or(Vec3::Z);
             let got = offset_ray_origin(p, n, n);
-            let want = Vec3::new(offset_component(p.x, n.x), offset_component(p.y, n.y), offset_component(p.z, n.z));
+            let want = offset_ray_origin_lanewise(p, n, n);
             assert_eq!(got.to_array().map(f32::to_bits), want.to_array().map(f32::to_bits), "{p} {n}");
+            // And so the shadow ray to a point on a light, whichever offset it takes.
+            let (q, nq) = (p + Vec3::new(c(), c(), c()), -n);
+            let ((a, ta), (b, tb)) = (spawn_ray_to(p, n, q, nq), spawn_ray_to_lanewise(p, n, q, nq));
+            let bits = |r: Ray| [r.o, r.d].map(|v| v.to_array().map(f32::to_bits));
+            assert_eq!((bits(a), ta.to_bits()), (bits(b), tb.to_bits()), "{p} {n} {q}");
         }
     }
 }

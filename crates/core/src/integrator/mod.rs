@@ -54,6 +54,25 @@ pub trait Integrator: Sync {
         sampler: &mut Sampler,
         stats: &mut RayStats,
     ) -> Rgb;
+
+    /// The radiance along the camera rays `rays[i]` for the lanes `i` whose sampler is
+    /// `samplers[i]` (the lanes past `samplers` give black): lane by lane what
+    /// [`Integrator::radiance`] gives, with each sampler's numbers drawn in the same order.
+    /// Integrators that gain from running paths together override it.
+    fn radiance8<A: Accel>(
+        &self,
+        world: &World<A>,
+        rays: &[Ray; 8],
+        firsts: [Option<Intersection>; 8],
+        samplers: &mut [Sampler],
+        stats: &mut RayStats,
+    ) -> [Rgb; 8] {
+        let mut out = [Rgb::ZERO; 8];
+        for (i, sampler) in samplers.iter_mut().enumerate().take(8) {
+            out[i] = self.radiance(world, &rays[i], firsts[i], sampler, stats);
+        }
+        out
+    }
 }
 
 /// The integrator a render uses, chosen once per render (enum dispatch, no virtual calls).
@@ -75,6 +94,20 @@ impl Integrator for AnyIntegrator {
         match self {
             AnyIntegrator::Whitted(w) => w.radiance(world, ray, first, sampler, stats),
             AnyIntegrator::Path(p) => p.radiance(world, ray, first, sampler, stats),
+        }
+    }
+
+    fn radiance8<A: Accel>(
+        &self,
+        world: &World<A>,
+        rays: &[Ray; 8],
+        firsts: [Option<Intersection>; 8],
+        samplers: &mut [Sampler],
+        stats: &mut RayStats,
+    ) -> [Rgb; 8] {
+        match self {
+            AnyIntegrator::Whitted(w) => w.radiance8(world, rays, firsts, samplers, stats),
+            AnyIntegrator::Path(p) => p.radiance8(world, rays, firsts, samplers, stats),
         }
     }
 }

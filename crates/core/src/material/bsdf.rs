@@ -156,6 +156,35 @@ pub fn cosine_hemisphere(u: Vec2) -> Vec3 {
     Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt())
 }
 
+/// The Lambertian lobe's sample for `wo` (local) whose cosine-weighted direction is `wi`
+/// (`cosine_hemisphere` of the sample's numbers), as [`Bsdf::sample`] gives it for
+/// [`Bsdf::Diffuse`]: for callers that work the direction out themselves (eight at a time).
+#[inline(always)]
+pub fn diffuse_sampled(albedo: Rgb, wo: Vec3, wi: Vec3) -> Option<BsdfSample> {
+    if wo.z <= 0.0 {
+        return None;
+    }
+    (wi.z > 0.0).then_some(BsdfSample { wi, weight: albedo, pdf: wi.z * FRAC_1_PI, delta: false })
+}
+
+/// The Lambertian lobe's [`Bsdf::eval`].
+#[inline(always)]
+pub fn diffuse_eval(albedo: Rgb, wo: Vec3, wi: Vec3) -> Rgb {
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return Rgb::ZERO;
+    }
+    albedo * (FRAC_1_PI * wi.z)
+}
+
+/// The Lambertian lobe's [`Bsdf::pdf`].
+#[inline(always)]
+pub fn diffuse_pdf(wo: Vec3, wi: Vec3) -> f32 {
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return 0.0;
+    }
+    wi.z * FRAC_1_PI
+}
+
 impl Bsdf<'_> {
     /// Whether the BSDF transmits (and so must see both sides of the surface as they are).
     pub fn transmits(&self) -> bool {
@@ -190,12 +219,7 @@ impl Bsdf<'_> {
     /// `f(wo, wi) |cos θ_i|` of the non-delta lobes.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
         match *self {
-            Bsdf::Diffuse { albedo } => {
-                if wo.z <= 0.0 || wi.z <= 0.0 {
-                    return Rgb::ZERO;
-                }
-                albedo * (FRAC_1_PI * wi.z)
-            }
+            Bsdf::Diffuse { albedo } => diffuse_eval(albedo, wo, wi),
             Bsdf::Conductor { reflectance, mf: Some(mf) } => {
                 if wo.z <= 0.0 || wi.z <= 0.0 {
                     return Rgb::ZERO;
@@ -227,12 +251,7 @@ impl Bsdf<'_> {
     /// Density of [`Self::sample`] producing `wi` through a non-delta lobe.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         match *self {
-            Bsdf::Diffuse { .. } => {
-                if wo.z <= 0.0 || wi.z <= 0.0 {
-                    return 0.0;
-                }
-                wi.z * FRAC_1_PI
-            }
+            Bsdf::Diffuse { .. } => diffuse_pdf(wo, wi),
             Bsdf::Conductor { mf: Some(mf), .. } => {
                 if wo.z <= 0.0 || wi.z <= 0.0 {
                     return 0.0;
@@ -268,8 +287,7 @@ impl Bsdf<'_> {
                 if wo.z <= 0.0 {
                     return None;
                 }
-                let wi = cosine_hemisphere(u);
-                (wi.z > 0.0).then_some(BsdfSample { wi, weight: albedo, pdf: wi.z * FRAC_1_PI, delta: false })
+                diffuse_sampled(albedo, wo, cosine_hemisphere(u))
             }
             Bsdf::Conductor { reflectance, mf } => {
                 if wo.z <= 0.0 {
