@@ -483,6 +483,7 @@ impl Integrator for Path {
                 unsafe {
                     lanes.run_avx2()
                 };
+                // (Elsewhere `world.avx2` is false and no vertex waits for the lanes.)
                 #[cfg(not(target_arch = "x86_64"))]
                 lanes.run();
                 for lane in crate::accel::lanes(wide) {
