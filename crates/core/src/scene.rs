@@ -833,21 +833,29 @@ impl<'s, A: Accel> World<'s, A> {
     pub fn shadow_ray(&self, hit: &Intersection, ng: Vec3, light: usize, ls: &LightSample) -> (Ray, f32, Skip) {
         if ls.infinite {
             let r = spawn_ray(hit.p, ng, Vec3::from(ls.wi));
-            return (r, f32::INFINITY, self.leaving(hit.object, hit.p, ng, r.d));
+            return (r, f32::INFINITY, self.shadow_skip(hit.object, hit.p, ng, light, None, r.d));
         }
         let (q, nq) = (Vec3::from(ls.p), Vec3::from(ls.n));
         let (r, t_max) = spawn_ray_to(hit.p, ng, q, nq);
-        (r, t_max, self.shadow_skip(hit.object, hit.p, ng, light, q, nq, r.d))
+        (r, t_max, self.shadow_skip(hit.object, hit.p, ng, light, Some((q, nq)), r.d))
     }
 
-    /// What the shadow ray `d` from `p` on object `obj` (geometric normal `ng`) to the point
-    /// `q` (normal `nq`) of light `light` passes over: see [`World::shadowed`].
-    #[allow(clippy::too_many_arguments)]
+    /// What the shadow ray `d` from `p` on object `obj` (geometric normal `ng`) to light
+    /// `light` passes over: see [`World::shadowed`]. `end`: the point the ray ends on and its
+    /// normal (`None` for a light at infinity).
     #[inline(always)]
-    pub(crate) fn shadow_skip(&self, obj: u32, p: Vec3, ng: Vec3, light: usize, q: Vec3, nq: Vec3, d: Vec3) -> Skip {
+    pub(crate) fn shadow_skip(
+        &self,
+        obj: u32,
+        p: Vec3,
+        ng: Vec3,
+        light: usize,
+        end: Option<(Vec3, Vec3)>,
+        d: Vec3,
+    ) -> Skip {
         let mut skip = self.leaving(obj, p, ng, d);
         let at = self.light_object[light];
-        if at != NO_OBJECT {
+        if let (Some((q, nq)), true) = (end, at != NO_OBJECT) {
             skip = skip.and(self.leaving(at, q, nq, -d));
         }
         skip

@@ -492,12 +492,9 @@ impl Integrator for Path {
                     if lanes.shadow[lane] {
                         stats.shadow += 1;
                         let r = Ray::new(get(&lanes.shadow_o, lane), get(&lanes.shadow_d, lane));
-                        let (q, nq) = (get(&lanes.light_q, lane), get(&lanes.light_n, lane));
-                        let skip = if lanes.light_inf[lane] {
-                            world.leaving(obj, p, ng, r.d)
-                        } else {
-                            world.shadow_skip(obj, p, ng, lights[lane], q, nq, r.d)
-                        };
+                        let end =
+                            (!lanes.light_inf[lane]).then(|| (get(&lanes.light_q, lane), get(&lanes.light_n, lane)));
+                        let skip = world.shadow_skip(obj, p, ng, lights[lane], end, r.d);
                         if !world.occluded_skipping(&r, lanes.shadow_t[lane], skip) {
                             s.l += Vec3A::from(get(&lanes.contrib, lane));
                         }

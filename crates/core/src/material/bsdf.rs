@@ -283,12 +283,7 @@ impl Bsdf<'_> {
     #[inline(always)]
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
         match *self {
-            Bsdf::Diffuse { albedo } => {
-                if wo.z <= 0.0 {
-                    return None;
-                }
-                diffuse_sampled(albedo, wo, cosine_hemisphere(u))
-            }
+            Bsdf::Diffuse { albedo } => diffuse_sampled(albedo, wo, cosine_hemisphere(u)),
             Bsdf::Conductor { reflectance, mf } => {
                 if wo.z <= 0.0 {
                     return None;
