@@ -193,6 +193,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                 let bw = (x1 - x0 + 2 * m) as usize;
                 let mut acc = vec![Accum::default(); bw * (y1 - y0 + 2 * m) as usize];
                 let mut packets = CameraPackets::new();
+                let mut scratch = I::Scratch::default();
                 // A splatted sample's columns and rows with their weights.
                 let (mut cols, mut rows) = ([(0, 0.0); SPLAT_SPAN], [(0, 0.0); SPLAT_SPAN]);
                 let aovs = settings.aovs;
@@ -209,6 +210,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
                             y,
                             &mut stats,
                             &mut packets,
+                            &mut scratch,
                             &mut |film, sample| {
                                 if !splat || unit_splat {
                                     acc[own].add(&sample, 1.0, aovs);
@@ -310,6 +312,7 @@ fn render_pixel<A: Accel, I: Integrator>(
     y: u32,
     stats: &mut RayStats,
     packets: &mut CameraPackets,
+    scratch: &mut I::Scratch,
     sink: &mut impl FnMut(Vec2, Accum),
 ) {
     const GROUPS: usize = CHUNK / 8;
@@ -343,22 +346,26 @@ fn render_pixel<A: Accel, I: Integrator>(
         for g in 0..n.div_ceil(8) {
             let m = (n - 8 * g).min(8);
             let (film, rays) = (&film[g], &rays[g]);
-            let firsts: [_; 8] =
+            let mut firsts: [_; 8] =
                 std::array::from_fn(|i| hits[g][i].as_ref().filter(|_| i < m).map(|h| world.interaction(&rays[i], h)));
             stats.camera += m as u64;
-            let mut samples = [Accum::default(); 8];
-            if s.aovs {
-                for (i, sample) in samples.iter_mut().enumerate().take(m) {
+            // The AOVs of the camera hits, where asked for (built before the integrator takes
+            // the hits over).
+            let aovs: Option<[Accum; 8]> = s.aovs.then(|| {
+                std::array::from_fn(|i| {
+                    let mut sample = Accum::default();
                     if let Some(hit) = &firsts[i] {
                         let (o, ray) = (&world.scene.objects[hit.object as usize], &rays[i]);
                         sample.albedo = world.scene.materials[o.material].albedo(hit.uv);
                         sample.normal = if hit.ns.dot(ray.d) > 0.0 { -hit.ns } else { hit.ns };
                         sample.depth = hit.t * ray.d.length();
                     }
-                }
-            }
-            let ls = integrator.radiance8(world, rays, firsts, &mut samplers[8 * g..8 * g + m], stats);
-            for (i, mut sample) in samples.into_iter().enumerate().take(m) {
+                    sample
+                })
+            });
+            let ls = integrator.radiance8(world, rays, &mut firsts, &mut samplers[8 * g..8 * g + m], stats, scratch);
+            for i in 0..m {
+                let mut sample = aovs.as_ref().map_or_else(Accum::default, |a| a[i]);
                 // Tested in 16-byte lanes, as the path tracer sums (see `Path::radiance`).
                 let l = glam::Vec3A::from(ls[i]);
                 // A non-finite sample (NaN from a degenerate configuration) would poison the

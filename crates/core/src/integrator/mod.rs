@@ -44,6 +44,10 @@ impl RayStats {
 
 /// Computes the radiance arriving along a camera ray.
 pub trait Integrator: Sync {
+    /// Working memory [`Integrator::radiance8`] keeps from one call to the next, made once
+    /// per tile (so that no call pays for setting it up).
+    type Scratch: Default;
+
     /// `first` is the ray's closest hit, `world.intersect(ray, f32::INFINITY)`, which the
     /// caller has found already (camera rays are traced in packets).
     fn radiance<A: Accel>(
@@ -58,18 +62,22 @@ pub trait Integrator: Sync {
     /// The radiance along the camera rays `rays[i]` for the lanes `i` whose sampler is
     /// `samplers[i]` (the lanes past `samplers` give black): lane by lane what
     /// [`Integrator::radiance`] gives, with each sampler's numbers drawn in the same order.
-    /// Integrators that gain from running paths together override it.
+    /// `hits[i]` holds camera ray `i`'s hit; the integrator may overwrite it (the path tracer
+    /// keeps each path's next hit there, which spares copying the eight hits). `scratch` holds
+    /// whatever an earlier call left there. Integrators that gain from running paths together
+    /// override it.
     fn radiance8<A: Accel>(
         &self,
         world: &World<A>,
         rays: &[Ray; 8],
-        firsts: [Option<Intersection>; 8],
+        hits: &mut [Option<Intersection>; 8],
         samplers: &mut [Sampler],
         stats: &mut RayStats,
+        _scratch: &mut Self::Scratch,
     ) -> [Rgb; 8] {
         let mut out = [Rgb::ZERO; 8];
         for (i, sampler) in samplers.iter_mut().enumerate().take(8) {
-            out[i] = self.radiance(world, &rays[i], firsts[i], sampler, stats);
+            out[i] = self.radiance(world, &rays[i], hits[i], sampler, stats);
         }
         out
     }
@@ -83,6 +91,8 @@ pub enum AnyIntegrator {
 }
 
 impl Integrator for AnyIntegrator {
+    type Scratch = (<Whitted as Integrator>::Scratch, <Path as Integrator>::Scratch);
+
     fn radiance<A: Accel>(
         &self,
         world: &World<A>,
@@ -101,13 +111,14 @@ impl Integrator for AnyIntegrator {
         &self,
         world: &World<A>,
         rays: &[Ray; 8],
-        firsts: [Option<Intersection>; 8],
+        hits: &mut [Option<Intersection>; 8],
         samplers: &mut [Sampler],
         stats: &mut RayStats,
+        scratch: &mut Self::Scratch,
     ) -> [Rgb; 8] {
         match self {
-            AnyIntegrator::Whitted(w) => w.radiance8(world, rays, firsts, samplers, stats),
-            AnyIntegrator::Path(p) => p.radiance8(world, rays, firsts, samplers, stats),
+            AnyIntegrator::Whitted(w) => w.radiance8(world, rays, hits, samplers, stats, &mut scratch.0),
+            AnyIntegrator::Path(p) => p.radiance8(world, rays, hits, samplers, stats, &mut scratch.1),
         }
     }
 }

@@ -393,7 +393,18 @@ impl Path {
     }
 }
 
+/// [`Path`]'s working memory between calls of [`Integrator::radiance8`]: its lanes, whose
+/// inputs are written only for the lanes that take part in a step (the others keep earlier
+/// values, worked out and then left unread), so that they are zeroed once per tile rather
+/// than once per call.
+#[derive(Default)]
+pub struct PathScratch {
+    lanes: DiffuseLanes,
+}
+
 impl Integrator for Path {
+    type Scratch = PathScratch;
+
     fn radiance<A: Accel>(
         &self,
         world: &World<A>,
@@ -421,17 +432,17 @@ impl Integrator for Path {
         &self,
         world: &World<A>,
         rays: &[Ray; 8],
-        firsts: [Option<Intersection>; 8],
+        next: &mut [Option<Intersection>; 8],
         samplers: &mut [Sampler],
         stats: &mut RayStats,
+        scratch: &mut PathScratch,
     ) -> [Rgb; 8] {
         let n = samplers.len().min(8);
         let samplers = &mut samplers[..n];
         let mut st: [PathState; 8] = std::array::from_fn(|i| PathState::new(&rays[i]));
-        let mut next = firsts;
         let mut queries = [(rays[0], Skip::NONE); 8];
         let mut live = (1u32 << samplers.len()) - 1;
-        let mut lanes = DiffuseLanes::default();
+        let lanes = &mut scratch.lanes;
         // Per lane in `lanes`: its object and light.
         let mut objs = [0u32; 8];
         let mut lights = [0usize; 8];

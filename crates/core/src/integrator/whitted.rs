@@ -98,6 +98,8 @@ struct Ctx<'a, 'w, A: Accel> {
 }
 
 impl Integrator for Whitted {
+    type Scratch = ();
+
     fn radiance<A: Accel>(
         &self,
         world: &World<A>,
