@@ -283,6 +283,9 @@ struct CameraPackets {
     lens: [[Vec2; 8]; CHUNK / 8],
     rays: [[Ray; 8]; CHUNK / 8],
     hits: [[Option<crate::scene::RawHit>; 8]; CHUNK / 8],
+    /// One packet's hits with their interactions, handed to the integrator (filled in place:
+    /// built as a new array and moved here, they were copied through `memcpy`).
+    firsts: [Option<crate::scene::Intersection>; 8],
 }
 
 impl CameraPackets {
@@ -293,6 +296,7 @@ impl CameraPackets {
             lens: [[Vec2::ZERO; 8]; CHUNK / 8],
             rays: [[Ray::new(Vec3::ZERO, Vec3::Z); 8]; CHUNK / 8],
             hits: [[None; 8]; CHUNK / 8],
+            firsts: [None; 8],
         }
     }
 }
@@ -319,7 +323,7 @@ fn render_pixel<A: Accel, I: Integrator>(
     let pixel = y as u64 * s.width as u64 + x as u64;
     let key = (crate::sampling::mix64(s.seed ^ pixel) >> 32) as u32;
     // Film and lens samples, rays and hits by packet of eight.
-    let CameraPackets { samplers, film, lens, rays, hits } = packets;
+    let CameraPackets { samplers, film, lens, rays, hits, firsts } = packets;
     for first in (0..s.spp).step_by(CHUNK) {
         let n = (s.spp - first).min(CHUNK as u32) as usize;
         for k in 0..n {
@@ -346,8 +350,9 @@ fn render_pixel<A: Accel, I: Integrator>(
         for g in 0..n.div_ceil(8) {
             let m = (n - 8 * g).min(8);
             let (film, rays) = (&film[g], &rays[g]);
-            let mut firsts: [_; 8] =
-                std::array::from_fn(|i| hits[g][i].as_ref().filter(|_| i < m).map(|h| world.interaction(&rays[i], h)));
+            for (i, first) in firsts.iter_mut().enumerate() {
+                *first = hits[g][i].as_ref().filter(|_| i < m).map(|h| world.interaction(&rays[i], h));
+            }
             stats.camera += m as u64;
             // The AOVs of the camera hits, where asked for (built before the integrator takes
             // the hits over).
@@ -363,7 +368,7 @@ fn render_pixel<A: Accel, I: Integrator>(
                     sample
                 })
             });
-            let ls = integrator.radiance8(world, rays, &mut firsts, &mut samplers[8 * g..8 * g + m], stats, scratch);
+            let ls = integrator.radiance8(world, rays, firsts, &mut samplers[8 * g..8 * g + m], stats, scratch);
             for i in 0..m {
                 let mut sample = aovs.as_ref().map_or_else(Accum::default, |a| a[i]);
                 // Tested in 16-byte lanes, as the path tracer sums (see `Path::radiance`).
