@@ -87,9 +87,11 @@ impl PathState {
     }
 }
 
-/// A vertex's surface, ready to shade: what [`Path::begin`] finds.
-struct Shade<'a> {
-    hit: Intersection,
+/// A vertex's surface, ready to shade: what [`Path::begin`] finds. The hit is borrowed where
+/// the query left it: copied into the vertex, it was read back in other pieces than it had
+/// just been written in, a store-forwarding stall on every vertex.
+struct Shade<'a, 'h> {
+    hit: &'h Intersection,
     bsdf: Bsdf<'a>,
     /// The geometric and shading normals, an opaque surface's turned to the side the path
     /// arrives from.
@@ -230,7 +232,7 @@ impl Path {
         &self,
         world: &World<A>,
         st: &mut PathState,
-        next: Option<Intersection>,
+        next: Option<&Intersection>,
         rng: &mut Sampler,
         stats: &mut RayStats,
     ) -> Option<(Ray, Skip)> {
@@ -243,12 +245,12 @@ impl Path {
     /// seen along the path, the depth limit, and the surface's BSDF and normals. `None` where
     /// the path ends.
     #[inline(always)]
-    fn begin<'a, A: Accel>(
+    fn begin<'a, 'h, A: Accel>(
         &self,
         world: &World<'a, A>,
         st: &mut PathState,
-        next: Option<Intersection>,
-    ) -> Option<Shade<'a>> {
+        next: Option<&'h Intersection>,
+    ) -> Option<Shade<'a, 'h>> {
         let scene = world.scene;
         let Some(hit) = next else {
             st.l += st.beta * Vec3A::from(scene.background);
@@ -416,7 +418,7 @@ impl Integrator for Path {
         let mut st = PathState::new(camera_ray);
         // The camera ray's hit comes with it; each later one is found here.
         let mut next = first;
-        while let Some((ray, skip)) = self.vertex(world, &mut st, next, rng, stats) {
+        while let Some((ray, skip)) = self.vertex(world, &mut st, next.as_ref(), rng, stats) {
             next = world.intersect_skipping(&ray, f32::INFINITY, skip);
         }
         st.l.into()
@@ -454,7 +456,7 @@ impl Integrator for Path {
                 if live & 1 << lane == 0 {
                     continue;
                 }
-                let Some(shade) = self.begin(world, &mut st[lane], next[lane]) else {
+                let Some(shade) = self.begin(world, &mut st[lane], next[lane].as_ref()) else {
                     live &= !(1 << lane);
                     continue;
                 };

@@ -157,7 +157,7 @@ impl Material {
     }
 
     /// The BSDF at a point with texture coordinates `uv`, in the local shading frame.
-    #[inline]
+    #[inline(always)]
     pub fn bsdf(&self, uv: Vec2) -> Bsdf<'_> {
         match self.surface() {
             Material::Diffuse { albedo } => Bsdf::Diffuse { albedo: albedo.eval(uv) },
