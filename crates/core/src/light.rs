@@ -122,17 +122,23 @@ impl Environment {
     pub fn eval_pdf(&self, d: Vec3) -> (Rgb, f32) {
         match &self.map {
             None => (self.scale, 1.0 / (4.0 * PI)),
-            Some(m) => self.eval_pdf_map(m, d),
+            Some(m) => {
+                let (radiance, pdf) = self.eval_pdf_map(m, d);
+                (radiance.into(), pdf)
+            }
         }
     }
 
-    fn eval_pdf_map(&self, m: &EnvMap, d: Vec3) -> (Rgb, f32) {
+    /// [`Environment::eval_pdf`] of a map. The radiance comes back in 16-byte lanes: as an
+    /// `Rgb` it was merged with a constant environment's through memory, written in two pieces
+    /// and read back in two others (a store-forwarding stall on every path that escapes).
+    fn eval_pdf_map(&self, m: &EnvMap, d: Vec3) -> (Vec3A, f32) {
         let uv = self.local_uv(d);
         let pdf = match &m.distribution {
             None => 1.0 / (4.0 * PI),
             Some(dist) => Self::pdf_uv(dist, uv),
         };
-        (self.scale * m.lookup(uv), pdf)
+        ((self.scale * m.lookup(uv)).into(), pdf)
     }
 
     /// Solid-angle density of sampling world direction `d`.
