@@ -164,7 +164,10 @@ impl Environment {
         dist.pdf(uv) / (2.0 * PI * PI * sin)
     }
 
-    fn sample(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
+    /// A direction towards the environment for `u` uniform in `[0, 1)²`, by its map where it
+    /// has one (uniformly over the sphere otherwise). The sample's point is left at the
+    /// origin: [`Light::sample`] puts it at `p + wi` for the shading point `p`.
+    fn sample(&self, u: Vec2) -> Option<LightSample> {
         let (wi, radiance, pdf) = match self.map.as_ref().and_then(|m| m.distribution.as_ref()) {
             None => {
                 let z = 1.0 - 2.0 * u.x;
@@ -190,7 +193,8 @@ impl Environment {
             return None;
         }
         let value = radiance / pdf;
-        Some(LightSample::new(wi, p + wi, Vec3::ZERO, true, value, pdf))
+        // The point, `p + wi`, is the caller's to fill in.
+        Some(LightSample::new(wi, Vec3::ZERO, Vec3::ZERO, true, value, pdf))
     }
 }
 
@@ -434,7 +438,10 @@ impl Light {
                 Some(LightSample::new(-*direction, p - *direction, Vec3::ZERO, true, *irradiance, 0.0))
             }
             Light::Area(a) => a.sample(p, u),
-            Light::Environment(e) => e.sample(p, u),
+            // The environment's sample without `p`: given it, the out-of-line call took the
+            // point's address, which kept it in memory for every light, stored in two pieces
+            // and read back in others (a store-forwarding stall on every light sample).
+            Light::Environment(e) => e.sample(u).map(|s| LightSample { p: (p + Vec3::from(s.wi)).into(), ..s }),
         }
     }
 }
@@ -946,7 +953,7 @@ mod tests {
             let mut est = Rgb::ZERO;
             for _ in 0..n {
                 // `None` only where a direction rounds into a black cell (measure zero).
-                let Some(s) = e.sample(Vec3::ZERO, rng.next_2d()) else { continue };
+                let Some(s) = e.sample(rng.next_2d()) else { continue };
                 assert!((s.pdf - e.pdf(s.wi.into())).abs() <= 1e-3 * s.pdf, "{} vs {}", s.pdf, e.pdf(s.wi.into()));
                 assert!(s.infinite && (s.wi.length() - 1.0).abs() < 1e-5);
                 est += Vec3::from(s.value) / n as f32;
