@@ -2,7 +2,7 @@ use glam::Vec3;
 
 /// A ray `o + t·d`. The direction need not be unit length (rays carried into an instance's
 /// object space keep the same `t` as in world space and so are generally not normalized).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Ray {
     pub o: Vec3,
     pub d: Vec3,

@@ -153,8 +153,9 @@ struct DiffuseLanes {
     // whether the BSDF sample goes on (`ok`), its density, direction and the next ray's origin.
     contrib: [[f32; 8]; 3],
     shadow: [bool; 8],
-    shadow_o: [[f32; 8]; 3],
-    shadow_d: [[f32; 8]; 3],
+    /// Each lane's shadow ray, whole (`occluded_skipping` reads it from here: put together
+    /// from the lanes just before the query, its pieces stalled the query's first loads).
+    shadow_ray: [Ray; 8],
     shadow_t: [f32; 8],
     ok: [bool; 8],
     pdf: [f32; 8],
@@ -196,8 +197,7 @@ impl DiffuseLanes {
             } else {
                 spawn_ray_to_lanewise(p, ng, get(&self.light_q, i), get(&self.light_n, i))
             };
-            put(&mut self.shadow_o, i, r.o);
-            put(&mut self.shadow_d, i, r.d);
+            self.shadow_ray[i] = r;
             self.shadow_t[i] = t;
             // The BSDF sample: as `Path::finish`.
             let wi = cosine_hemisphere(Vec2::new(self.u[0][i], self.u[1][i]));
@@ -504,11 +504,11 @@ impl Integrator for Path {
                     let (p, ng, obj) = (get(&lanes.p, lane), get(&lanes.ng, lane), objs[lane]);
                     if lanes.shadow[lane] {
                         stats.shadow += 1;
-                        let r = Ray::new(get(&lanes.shadow_o, lane), get(&lanes.shadow_d, lane));
+                        let r = &lanes.shadow_ray[lane];
                         let end =
                             (!lanes.light_inf[lane]).then(|| (get(&lanes.light_q, lane), get(&lanes.light_n, lane)));
                         let skip = world.shadow_skip(obj, p, ng, lights[lane], end, r.d);
-                        if !world.occluded_skipping(&r, lanes.shadow_t[lane], skip) {
+                        if !world.occluded_skipping(r, lanes.shadow_t[lane], skip) {
                             s.l += Vec3A::from(get(&lanes.contrib, lane));
                         }
                     }
