@@ -6,7 +6,9 @@ mod ray;
 mod transform;
 
 pub use aabb::{Aabb, EXIT_ROUNDING};
-pub use offset::{offset_ray_origin, offset_ray_origin_lanewise, spawn_ray, spawn_ray_to, spawn_ray_to_lanewise};
+pub use offset::{
+    offset_ray_origin, offset_ray_origin_lanewise, spawn_ray, spawn_ray_lanewise, spawn_ray_to, spawn_ray_to_lanewise,
+};
 pub use ray::Ray;
 pub use transform::Transform;
 

@@ -86,6 +86,12 @@ pub fn spawn_ray(p: Vec3, ng: Vec3, d: Vec3) -> Ray {
     Ray::new(offset_ray_origin(p, ng, d), d)
 }
 
+/// [`spawn_ray`] with [`offset_ray_origin_lanewise`], for loops over several rays.
+#[inline(always)]
+pub fn spawn_ray_lanewise(p: Vec3, ng: Vec3, d: Vec3) -> Ray {
+    Ray::new(offset_ray_origin_lanewise(p, ng, d), d)
+}
+
 /// A ray from surface point `p` towards the point `q` (on a surface with normal `nq`, or
 /// `Vec3::ZERO` for a point light). Returns the ray, with `t = 1` at the (offset) target, and
 /// the largest `t` that a shadow test should consider.
