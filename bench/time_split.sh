@@ -43,8 +43,13 @@ for scene in "${render_scenes[@]}"; do
     snell_define=()
     [ ${#define[@]} -gt 0 ] && snell_define=(-D "${define[0]}")
     : > "$tmp/snell.times"
-    perf record -q -o "$tmp/snell.data" -- bash -c "for i in \$(seq $RUNS); do '$bin' render '$scene' ${snell_define[*]} --spp $SPP --threads 2 -o '$tmp/x.exr' 2>&1 | sed -n 's/.*render \([0-9.]*\) s.*/\1/p' >> '$tmp/snell.times'; done" \
-        >/dev/null 2>&1
+    # RUNS renders in one recording; the arguments go in as positional parameters, so that
+    # paths with spaces stay whole.
+    perf record -q -o "$tmp/snell.data" -- bash -c 'runs=$1 times=$2; shift 2
+        for i in $(seq "$runs"); do
+            "$@" 2>&1 | sed -n "s/.*render \([0-9.]*\) s.*/\1/p" >> "$times"
+        done' _ "$RUNS" "$tmp/snell.times" "$bin" render "$scene" "${snell_define[@]}" --spp "$SPP" --threads 2 \
+        -o "$tmp/x.exr" >/dev/null 2>&1
     # The binary's own samples, less the scene's loading and the structures' build.
     echo "   Snell ($(median < "$tmp/snell.times") s median): $(share "$tmp/snell.data" dso,sym \
         'accel::|Tri4|World<A>::hit_|World<A>::occluded|closest_in_object|any_in_object|TriData' \
