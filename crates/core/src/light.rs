@@ -564,19 +564,7 @@ impl AreaLight {
                 let (b1, b2) = uniform_triangle(Vec2::new(ux, u.y));
                 let q = a * (1.0 - b1 - b2) + b * b1 + c * b2;
                 let n = (b - a).cross(c - a).normalize_or_zero();
-                let d = q - p;
-                let dist2 = d.length_squared();
-                if dist2 <= 0.0 || n == Vec3::ZERO {
-                    return None;
-                }
-                let wi = d / dist2.sqrt();
-                let cos_l = n.dot(-wi);
-                if cos_l <= 0.0 {
-                    return None; // Back of a one-sided emitter.
-                }
-                // Area pdf 1/A converted to solid angle: dist² / (cos_l · A).
-                let pdf = dist2 / (cos_l * total);
-                Some(LightSample::new(wi, q, n, false, self.emission / pdf, pdf))
+                self.area_sample(p, q, n, total)
             }
         }
     }
@@ -590,19 +578,29 @@ impl AreaLight {
         let AreaShape::Rectangle { corner, ex, ey, normal, area } = &self.shape else { return None };
         match r {
             Some(r) => self.spherical_sample(p, r.sample(u), r),
-            None => {
-                let q = *corner + *ex * u.x + *ey * u.y;
-                let d = q - p;
-                let dist2 = d.length_squared();
-                let wi = d / dist2.sqrt();
-                let cos_l = normal.dot(-wi);
-                if !(cos_l > 0.0 && dist2 > 0.0) {
-                    return None;
-                }
-                let pdf = dist2 / (cos_l * *area);
-                Some(LightSample::new(wi, q, *normal, false, self.emission / pdf, pdf))
-            }
+            None => self.area_sample(p, *corner + *ex * u.x + *ey * u.y, *normal, *area),
         }
+    }
+
+    /// The sample of this light's point `q` (normal `n`, emitting towards it), drawn uniformly
+    /// over its `area`, seen from `p`: the area density 1/A converted to solid angle,
+    /// dist² / (cos_l · A). `None` on the emitter's back or at `p` itself (and for a zero `n`).
+    /// Written with cos_l · dist (`cos_d`) so that the side test waits for no square root, and
+    /// the density and the value (emission over density) divide side by side rather than one
+    /// after the other behind the direction's division: a sample's chain of a square root and
+    /// three divisions was 4 % of the Cornell box's time.
+    #[inline(always)]
+    fn area_sample(&self, p: Vec3, q: Vec3, n: Vec3, area: f32) -> Option<LightSample> {
+        let d = q - p;
+        let dist2 = d.length_squared();
+        let cos_d = -n.dot(d);
+        if !(cos_d > 0.0 && dist2 > 0.0) {
+            return None; // Back of a one-sided emitter (or p on it).
+        }
+        let dist = dist2.sqrt();
+        // cos_l · A · dist² = cos_d · A · dist: the density's denominator over dist.
+        let (seen, cube) = (cos_d * area, dist2 * dist);
+        Some(LightSample::new(d / dist, q, n, false, self.emission * (seen / cube), cube / seen))
     }
 
     /// The sample of this rectangle light whose point `q` was drawn from its spherical
@@ -777,6 +775,9 @@ mod tests {
         let area_pdf = s.p.length_squared() / (s.wi.z * 1.0);
         assert!((s.pdf - area_pdf).abs() < 1e-5 * area_pdf, "{} vs {area_pdf}", s.pdf);
         assert!((small.pdf(Vec3::ZERO, s.p.into(), s.n.into()) - area_pdf).abs() < 1e-5 * area_pdf);
+        // The value (emission over density) and the density are divided apart: they agree.
+        let product = s.value * s.pdf;
+        assert!((product - glam::Vec3A::ONE).abs().max_element() < 1e-5, "{product}");
         // Far away, where the solid angle is tiny, it falls back to area sampling (same answer).
         let far = rectangle(Vec3::new(-0.05, -0.05, 20.0), Vec3::new(0.0, 0.1, 0.0), Vec3::new(0.1, 0.0, 0.0));
         let e = irradiance(&far, 10_000);
