@@ -614,6 +614,10 @@ pub struct World<'s, A: Accel> {
     /// [`World::interaction`] would compute it: worked out once, not at every hit, where its
     /// square root and division sat on the path of every shading point.
     face_normals: Vec<Vec<Vec3>>,
+    /// Per object, an untransformed mesh's arrays straight from the scene (`None` for spheres
+    /// and transformed meshes): [`World::interaction`] reaches a hit's vertices from here in
+    /// one load instead of through the object, the geometry and the mesh in turn.
+    object_meshes: Vec<Option<MeshRef<'s>>>,
     /// Per object, `(geometry, first block, end)` where the object is an untransformed mesh
     /// tested as one range of blocks: the top level's leaf test goes straight to them.
     /// `NOT_DIRECT` in the first field otherwise.
@@ -691,6 +695,14 @@ impl<'s, A: Accel> World<'s, A> {
                 _ => (NOT_DIRECT, 0, 0),
             })
             .collect();
+        let object_meshes = scene
+            .objects
+            .iter()
+            .map(|o| match (&scene.geometries[o.geometry], &o.transform) {
+                (Geometry::Mesh(m), None) => Some(MeshRef::new(m, o.geometry)),
+                _ => None,
+            })
+            .collect();
         // Worked out in world space: a mesh's as it stands (meshes under a transform are left
         // `Possible`), a sphere's about its placed centre (an ellipsoid is as convex). Where
         // every triangle lies on a face of the mesh's box (the walls of an axis-aligned room, an
@@ -748,6 +760,7 @@ impl<'s, A: Accel> World<'s, A> {
             blas,
             tris,
             face_normals,
+            object_meshes,
             object_blocks,
             reentry,
             top_by_object,
@@ -1252,6 +1265,10 @@ impl<'s, A: Accel> World<'s, A> {
     /// finds it).
     pub fn interaction(&self, ray: &Ray, h: &RawHit) -> Intersection {
         let RawHit { t, object: obj, prim, b1, b2 } = *h;
+        if let Some(m) = &self.object_meshes[obj as usize] {
+            let (p, ng, ns, uv) = m.surface(self.face_normals[m.geometry][prim as usize], prim, b1, b2);
+            return Intersection::new(ray, t, p, ng, ns, uv, obj);
+        }
         let o = &self.scene.objects[obj as usize];
         let (p, mut ng, mut ns, uv) = match &self.scene.geometries[o.geometry] {
             Geometry::Sphere(s) => {
@@ -1269,32 +1286,7 @@ impl<'s, A: Accel> World<'s, A> {
                 (p, n, n, uv)
             }
             Geometry::Mesh(m) => {
-                let [i0, i1, i2] = m.indices[prim as usize];
-                let (i0, i1, i2) = (i0 as usize, i1 as usize, i2 as usize);
-                let b0 = 1.0 - b1 - b2;
-                let (p0, p1, p2) = (m.positions[i0], m.positions[i1], m.positions[i2]);
-                // The hit point from barycentrics is far more accurate than o + t·d.
-                let p = p0 * b0 + p1 * b1 + p2 * b2;
-                let mut ng = self.face_normals[o.geometry][prim as usize];
-                let ns = match &m.normals {
-                    Some(n) => {
-                        let ns = (n[i0] * b0 + n[i1] * b1 + n[i2] * b2).normalize_or_zero();
-                        if ns == Vec3::ZERO {
-                            ng
-                        } else {
-                            if ng.dot(ns) < 0.0 {
-                                ng = -ng;
-                            }
-                            ns
-                        }
-                    }
-                    None => ng,
-                };
-                let uv = match &m.uvs {
-                    Some(u) => u[i0] * b0 + u[i1] * b1 + u[i2] * b2,
-                    None => Vec2::new(b1, b2),
-                };
-                (p, ng, ns, uv)
+                MeshRef::new(m, o.geometry).surface(self.face_normals[o.geometry][prim as usize], prim, b1, b2)
             }
         };
         let p = match &o.transform {
@@ -1305,13 +1297,76 @@ impl<'s, A: Accel> World<'s, A> {
             }
             None => p,
         };
+        Intersection::new(ray, t, p, ng, ns, uv, obj)
+    }
+}
+
+/// A mesh's arrays as [`World::interaction`] reads them, and the index of its geometry.
+#[derive(Clone, Copy)]
+struct MeshRef<'s> {
+    indices: &'s [[u32; 3]],
+    positions: &'s [Vec3],
+    normals: Option<&'s [Vec3]>,
+    uvs: Option<&'s [Vec2]>,
+    geometry: usize,
+}
+
+impl<'s> MeshRef<'s> {
+    fn new(m: &'s Mesh, geometry: usize) -> MeshRef<'s> {
+        MeshRef {
+            indices: &m.indices,
+            positions: &m.positions,
+            normals: m.normals.as_deref(),
+            uvs: m.uvs.as_deref(),
+            geometry,
+        }
+    }
+
+    /// The point, geometric normal (`face_normal`, turned to the shading normal's side),
+    /// shading normal and texture coordinates at barycentrics `(b1, b2)` of triangle `prim`.
+    #[inline(always)]
+    fn surface(&self, face_normal: Vec3, prim: u32, b1: f32, b2: f32) -> (Vec3, Vec3, Vec3, Vec2) {
+        let [i0, i1, i2] = self.indices[prim as usize];
+        let (i0, i1, i2) = (i0 as usize, i1 as usize, i2 as usize);
+        let b0 = 1.0 - b1 - b2;
+        let (p0, p1, p2) = (self.positions[i0], self.positions[i1], self.positions[i2]);
+        // The hit point from barycentrics is far more accurate than o + t·d.
+        let p = p0 * b0 + p1 * b1 + p2 * b2;
+        let mut ng = face_normal;
+        let ns = match self.normals {
+            Some(n) => {
+                let ns = (n[i0] * b0 + n[i1] * b1 + n[i2] * b2).normalize_or_zero();
+                if ns == Vec3::ZERO {
+                    ng
+                } else {
+                    if ng.dot(ns) < 0.0 {
+                        ng = -ng;
+                    }
+                    ns
+                }
+            }
+            None => ng,
+        };
+        let uv = match self.uvs {
+            Some(u) => u[i0] * b0 + u[i1] * b1 + u[i2] * b2,
+            None => Vec2::new(b1, b2),
+        };
+        (p, ng, ns, uv)
+    }
+}
+
+impl Intersection {
+    /// The hit with its normals made usable: a zero geometric normal faces the ray, and a
+    /// shading normal that is zero or on the other side is the geometric one.
+    #[inline(always)]
+    fn new(ray: &Ray, t: f32, p: Vec3, mut ng: Vec3, mut ns: Vec3, uv: Vec2, object: u32) -> Intersection {
         if ng == Vec3::ZERO {
             ng = -ray.d.normalize_or_zero();
         }
         if ns == Vec3::ZERO || ns.dot(ng) <= 0.0 {
             ns = ng;
         }
-        Intersection { t, p, ng, ns, uv, object: obj }
+        Intersection { t, p, ng, ns, uv, object }
     }
 }
 
