@@ -905,6 +905,7 @@ const ROW_BYTES: usize = std::mem::size_of::<[f32; WIDTH]>();
 /// Per-ray data for the wide slab test: origin, inverse direction, the inverse direction
 /// rounded up for exit distances, and for each axis which of the `bounds` rows holds the near
 /// plane (min for a positive direction, max otherwise).
+#[derive(Clone, Copy)]
 struct RayPre {
     o: [f32; 3],
     inv: [f32; 3],
@@ -1126,7 +1127,7 @@ fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32, out: &mut [f32;
     if r.finite {
         slab_avx_with::<true, FUSED>(n, r, t_max, out)
     } else {
-        slab_avx_float(n, r, t_max, out)
+        slab_avx_float(n, *r, t_max, out)
     }
 }
 
@@ -1135,8 +1136,8 @@ fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32, out: &mut [f32;
 #[target_feature(enable = "avx2,fma")]
 #[cold]
 #[inline(never)]
-fn slab_avx_float(n: &Wide, r: &RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
-    slab_avx_with::<false, false>(n, r, t_max, out)
+fn slab_avx_float(n: &Wide, r: RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+    slab_avx_with::<false, false>(n, &r, t_max, out)
 }
 
 /// [`slab_avx`]'s arithmetic: maxima and minima on the floats' bits where `INT`, float ones
@@ -1381,6 +1382,11 @@ impl Bvh {
         counter: &impl Counter,
     ) -> bool {
         let inv = ray.d.recip();
+        if self.nodes.len() == 1 && !self.root_leaf {
+            // The ray's constants made here apart from the walk's, so that they stay in
+            // registers rather than being laid out in memory for a walk that never runs.
+            return self.closest_in_root::<AVX, FUSED>(&ray_pre::<FUSED>(ray, inv), t_max, test, counter);
+        }
         // A tree that is a single leaf starts at that leaf (one call site of `test`, so that
         // it is inlined), once its box is hit; otherwise the root node's test of its children's
         // boxes culls.
@@ -1396,9 +1402,6 @@ impl Bvh {
         };
         let mut hit = false;
         let r = ray_pre::<FUSED>(ray, inv);
-        if self.nodes.len() == 1 && !self.root_leaf {
-            return self.closest_in_root::<AVX, FUSED>(&r, t_max, test, counter);
-        }
         // Uninitialised: zeroing it (3.5 KiB) per ray showed up in profiles. Only entries below `sp`
         // are read, and each was written first.
         let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); (WIDTH - 1) * MAX_STACK];
@@ -1499,6 +1502,10 @@ impl Bvh {
         counter: &impl Counter,
     ) -> bool {
         let inv = ray.d.recip();
+        if self.nodes.len() == 1 && !self.root_leaf {
+            // As in `closest_walk`.
+            return self.any_in_root::<AVX, FUSED>(&ray_pre::<FUSED>(ray, inv), t_max, test, counter);
+        }
         let root = if self.root_leaf {
             if self.root_box.slab(ray.o, inv, 0.0, t_max).is_none() {
                 return false;
@@ -1510,9 +1517,6 @@ impl Bvh {
             0
         };
         let r = ray_pre::<FUSED>(ray, inv);
-        if self.nodes.len() == 1 && !self.root_leaf {
-            return self.any_in_root::<AVX, FUSED>(&r, t_max, test, counter);
-        }
         let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); (WIDTH - 1) * MAX_STACK];
         stack[0].write((root, 0.0));
         let mut sp = 1usize;
