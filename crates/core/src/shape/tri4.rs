@@ -20,23 +20,25 @@ pub struct Tri4 {
     pub id: [u32; 4],
 }
 
-/// Per-ray data of the 4-wide test: the watertight ray, its origin in sheared-axis order and
-/// the shear constants (broadcast to the four lanes by the test itself, so that the ray stays
-/// small enough to pass around and copy cheaply).
+/// Per-ray data of the 4-wide test: the watertight ray and, where the test runs in SSE lanes,
+/// its origin in sheared-axis order and its shear constants, each broadcast to four lanes once
+/// per ray (a ray that reaches several leaves or objects shares them, where each run of blocks
+/// broadcast them again), with its axes as indices.
 #[derive(Clone, Copy, Debug)]
 pub struct Ray4 {
     pub ray: WatertightRay,
-    o: [f32; 3],
-    s: [f32; 3],
-    k: [u8; 3],
+    #[cfg(target_arch = "x86_64")]
+    lanes: Lanes4,
 }
 
 impl Ray4 {
     #[inline]
     pub fn new(ray: WatertightRay) -> Ray4 {
-        let k = ray.axes();
-        let o = ray.o.to_array();
-        Ray4 { ray, o: [o[k[0]], o[k[1]], o[k[2]]], s: ray.shear(), k: k.map(|a| a as u8) }
+        Ray4 {
+            ray,
+            #[cfg(target_arch = "x86_64")]
+            lanes: Lanes4::new(&ray),
+        }
     }
 }
 
@@ -110,11 +112,11 @@ impl Tri4 {
     #[inline(always)]
     pub fn closest_in(blocks: &[Tri4], r: &Ray4, mut t_max: f32) -> Option<(u32, TriHit)> {
         #[cfg(target_arch = "x86_64")]
-        let l = Lanes4::new(r);
+        let l = &r.lanes;
         let mut rec = None;
         for block in blocks {
             #[cfg(target_arch = "x86_64")]
-            let found = match block.lanes(&l, t_max) {
+            let found = match block.lanes(l, t_max) {
                 Some((mask, t, inv, v, w)) => block.nearest(mask, t, inv, v, w),
                 None => block.closest_scalar(r, t_max),
             };
@@ -132,10 +134,10 @@ impl Tri4 {
     #[inline(always)]
     pub fn any_in(blocks: &[Tri4], r: &Ray4, t_max: f32) -> bool {
         #[cfg(target_arch = "x86_64")]
-        let l = Lanes4::new(r);
+        let l = &r.lanes;
         blocks.iter().any(|block| {
             #[cfg(target_arch = "x86_64")]
-            if let Some((mask, ..)) = block.lanes(&l, t_max) {
+            if let Some((mask, ..)) = block.lanes(l, t_max) {
                 return mask != 0;
             }
             block.closest_scalar(r, t_max).is_some()
@@ -234,9 +236,9 @@ impl Tri4 {
     }
 }
 
-/// A [`Ray4`]'s constants in SSE lanes with its axes as indices below 3: made once for a run
-/// of blocks (the block test alone would broadcast them again for every block).
+/// A [`Ray4`]'s constants in SSE lanes, with its axes as indices below 3.
 #[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, Debug)]
 struct Lanes4 {
     o: [std::arch::x86_64::__m128; 3],
     s: [std::arch::x86_64::__m128; 3],
@@ -246,16 +248,18 @@ struct Lanes4 {
 #[cfg(target_arch = "x86_64")]
 impl Lanes4 {
     #[inline(always)]
-    fn new(r: &Ray4) -> Lanes4 {
+    fn new(ray: &WatertightRay) -> Lanes4 {
         use std::arch::x86_64::_mm_set1_ps;
+        let k = ray.axes();
+        let o = ray.o.to_array();
         // SAFETY: SSE is part of the x86_64 baseline.
         unsafe {
             Lanes4 {
-                o: r.o.map(|x| _mm_set1_ps(x)),
-                s: r.s.map(|x| _mm_set1_ps(x)),
+                o: [o[k[0]], o[k[1]], o[k[2]]].map(|x| _mm_set1_ps(x)),
+                s: ray.shear().map(|x| _mm_set1_ps(x)),
                 // Axes are below 3 (a permutation of 0, 1, 2); saying so here spares the
                 // blocks' loads their bounds checks.
-                k: r.k.map(|a| usize::from(a).min(2)),
+                k: k.map(|a| a.min(2)),
             }
         }
     }
@@ -570,8 +574,8 @@ mod tests {
             // SAFETY: AVX2 was detected above.
             let Some(r8) = (unsafe { Rays8::from_rays(&plain, lanes) }) else {
                 // Only where the lanes' axes differ.
-                let k = rays[lanes.trailing_zeros() as usize].k;
-                assert!((0..8).any(|l| lanes & (1 << l) != 0 && rays[l].k != k), "case {case}");
+                let k = rays[lanes.trailing_zeros() as usize].ray.axes();
+                assert!((0..8).any(|l| lanes & (1 << l) != 0 && rays[l].ray.axes() != k), "case {case}");
                 continue;
             };
             packets += 1;
@@ -605,7 +609,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn eight_ray_setup_is_the_single_ray_setup() {
-        use std::arch::x86_64::_mm256_storeu_ps;
+        use std::arch::x86_64::{_mm256_storeu_ps, _mm_storeu_ps};
         if !crate::accel::has_avx2_fma() {
             eprintln!("no AVX2: the eight-ray set-up is not used on this CPU");
             return;
@@ -618,6 +622,12 @@ mod tests {
             unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
             out.map(f32::to_bits)
         };
+        let four = |v: std::arch::x86_64::__m128| {
+            let mut out = [0.0f32; 4];
+            // SAFETY: SSE is part of the x86_64 baseline; an unaligned store into a local array.
+            unsafe { _mm_storeu_ps(out.as_mut_ptr(), v) };
+            out.map(f32::to_bits)
+        };
         for x in values {
             for y in values {
                 for z in values {
@@ -626,10 +636,13 @@ mod tests {
                     // SAFETY: AVX2 was detected above.
                     let got = unsafe { Rays8::from_rays(&[crate::geometry::Ray::new(o, d); 8], 0xff) }
                         .expect("eight copies of one ray share their axes");
-                    assert_eq!(got.k, want.k.map(usize::from), "direction {d}");
+                    assert_eq!(got.k, want.ray.axes(), "direction {d}");
                     for a in 0..3 {
-                        assert_eq!(lanes(got.o[a]), [want.o[a].to_bits(); 8], "direction {d}, origin {a}");
-                        assert_eq!(lanes(got.s[a]), [want.s[a].to_bits(); 8], "direction {d}, shear {a}");
+                        let (o8, s8) = (lanes(got.o[a]), lanes(got.s[a]));
+                        assert_eq!(four(want.lanes.o[a]), [o8[0]; 4], "direction {d}, origin {a}");
+                        assert_eq!(o8, [o8[0]; 8], "direction {d}, origin {a}");
+                        assert_eq!(four(want.lanes.s[a]), [s8[0]; 4], "direction {d}, shear {a}");
+                        assert_eq!(s8, [s8[0]; 8], "direction {d}, shear {a}");
                     }
                 }
             }
