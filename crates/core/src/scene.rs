@@ -486,22 +486,34 @@ impl TriData {
         let mut rec = None;
         match self {
             TriData::Leaves { blocks, ranges, labelled } => {
-                let mut leaf = |blocks: &[Tri4], tm: f32| {
+                // A run of blocks tested, its hit kept in `rec`: the hit's distance. A function
+                // inlined at both places, not a closure they share, which was a call per leaf.
+                #[inline(always)]
+                fn leaf(
+                    blocks: &[Tri4],
+                    r4: &mut Option<Ray4>,
+                    ray: &Ray,
+                    tm: f32,
+                    counter: &impl Counter,
+                    rec: &mut Option<(u32, TriHit)>,
+                ) -> Option<f32> {
                     let found = closest_in_blocks(blocks, shared_ray4(r4, ray), tm, counter)?;
-                    rec = Some(found);
+                    *rec = Some(found);
                     Some(found.1.t)
-                };
+                }
                 if let Some((a, b)) = TriData::one_range(ranges) {
                     // The top level has tested the object's box already (a one-object scene
                     // has none; the exact block tests decide alone there).
-                    if let Some(t) = leaf(&blocks[a as usize..b as usize], *t_max) {
+                    if let Some(t) = leaf(&blocks[a as usize..b as usize], r4, ray, *t_max, counter, &mut rec) {
                         *t_max = t;
                     }
                 } else {
                     accel.closest_leaf_counted(
                         ray,
                         t_max,
-                        |l, tm| leaf(TriData::leaf_blocks(blocks, ranges, *labelled, l), tm),
+                        |l, tm| {
+                            leaf(TriData::leaf_blocks(blocks, ranges, *labelled, l), r4, ray, tm, counter, &mut rec)
+                        },
                         counter,
                     );
                 }
