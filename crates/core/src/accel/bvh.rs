@@ -1131,7 +1131,9 @@ fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32, out: &mut [f32;
     }
 }
 
-/// [`slab_avx`] for rays with a zero direction component (kept out of the hot path).
+/// [`slab_avx`] for rays with a zero direction component (kept out of the hot path). It takes
+/// the ray's constants by value: by reference, every query laid them out in memory for this
+/// call, which almost never happens (the Cornell box 1.4 % more instructions).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[cold]
