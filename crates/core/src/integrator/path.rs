@@ -476,10 +476,10 @@ impl Integrator for Path {
             // Each live path's vertex up to its random numbers; Lambertian vertices wait for the
             // lanes, the others are finished one by one.
             let mut wide = 0u32;
-            for (lane, rng) in samplers.iter_mut().enumerate() {
-                if live & 1 << lane == 0 {
-                    continue;
-                }
+            // The live lanes as of now, visited by their bits (a test of every lane's bit was a
+            // branch mispredicted as paths end); a lane leaves `live` only on its own turn.
+            for lane in crate::accel::lanes(live) {
+                let rng = &mut samplers[lane];
                 let Some(shade) = self.begin(world, &mut st[lane], next[lane].as_ref()) else {
                     live &= !(1 << lane);
                     continue;
