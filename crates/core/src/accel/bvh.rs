@@ -2829,10 +2829,8 @@ mod tests {
         assert!(entered > 10_000 && fused_rays > 50_000, "{entered} boxes entered, {fused_rays} fused rays");
     }
 
-    /// The AVX2 traversal finds what the portable one finds. Its slab test's distances differ
-    /// from the portable one's by a few ulps ([`slab_avx`]), so children with almost the same
-    /// entry distance may be visited in the other order and a leaf at the edge of a box may
-    /// be tested by one and not the other; on these random boxes that hardly ever happens.
+    /// The walk's AVX2 placement of three or more hit children gives the insertion sort's
+    /// stack, ties included.
     #[test]
     fn children_placed_by_rank_as_the_insertion_sort_orders_them() {
         if !has_avx2_fma() {
@@ -2877,6 +2875,10 @@ mod tests {
         assert!(compared > 10_000);
     }
 
+    /// The AVX2 traversal finds what the portable one finds. Its slab test's distances differ
+    /// from the portable one's by a few ulps ([`slab_avx`]), so children with almost the same
+    /// entry distance may be visited in the other order and a leaf at the edge of a box may
+    /// be tested by one and not the other; on these random boxes that hardly ever happens.
     #[test]
     fn avx_traversal_matches_the_portable_one() {
         if !has_avx2_fma() {
