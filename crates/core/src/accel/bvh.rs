@@ -1289,12 +1289,12 @@ fn visit<const AVX: bool, const FUSED: bool, const ANY: bool>(
         // SAFETY: `AVX` is true only in traversals that run after AVX2 and POPCNT were detected.
         return Some(unsafe { push_by_rank(nodes, n, &t, mask, stack, sp) });
     }
-    Some(push_sorted(nodes, n, &t, mask, stack, sp))
+    Some(push_by_insertion(nodes, n, &t, mask, stack, sp))
 }
 
 /// [`push_by_rank`] without AVX2: the hit children sorted by insertion, then pushed.
 #[inline(always)]
-fn push_sorted(
+fn push_by_insertion(
     nodes: &[Wide],
     n: &Wide,
     t: &[f32; WIDTH],
@@ -2860,7 +2860,7 @@ mod tests {
                 let next = if rank {
                     unsafe { push_by_rank(&[], &n, &t, mask, &mut stack, &mut sp) }
                 } else {
-                    push_sorted(&[], &n, &t, mask, &mut stack, &mut sp)
+                    push_by_insertion(&[], &n, &t, mask, &mut stack, &mut sp)
                 };
                 // SAFETY: the entries below `sp` were written.
                 let pushed: Vec<(u32, u32)> =
