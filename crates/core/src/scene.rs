@@ -765,7 +765,7 @@ impl<'s, A: Accel> World<'s, A> {
             })
             .collect();
         let environment = lights.iter().position(|l| matches!(l, Light::Environment(_)));
-        let avx2 = crate::accel::has_avx2_fma();
+        let avx2 = crate::accel::has_avx2_fma_popcnt();
         let mut world = World {
             scene,
             top,

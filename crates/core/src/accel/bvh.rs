@@ -318,7 +318,7 @@ pub struct Bvh {
 
 /// Whether the CPU running this has AVX2, FMA and POPCNT (checked once per build; every CPU
 /// with AVX2 so far has the other two as well, which the single-ray walks use).
-pub(crate) fn has_avx2_fma() -> bool {
+pub(crate) fn has_avx2_fma_popcnt() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
@@ -2172,7 +2172,7 @@ mod packet {
         /// spread as an orthographic camera's), random active lanes and `t_max`, random boxes.
         #[test]
         fn frustum_enters_every_box_a_ray_enters() {
-            if !crate::accel::has_avx2_fma() {
+            if !crate::accel::has_avx2_fma_popcnt() {
                 eprintln!("no AVX2: the frustum traversal is not used on this CPU");
                 return;
             }
@@ -2252,7 +2252,7 @@ impl Accel for Bvh {
     ) -> u8 {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma`).
+            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma_popcnt`).
             return unsafe { packet::closest8(self, rays, active, t_max, &mut test) };
         }
         super::lane_by_lane(self, rays, active, t_max, test)
@@ -2267,7 +2267,7 @@ impl Accel for Bvh {
     ) -> [u8; P] {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma`).
+            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma_popcnt`).
             return unsafe { packet::closest_groups(self, rays, active, t_max, &mut test) };
         }
         super::groups_one_by_one(self, rays, active, t_max, test)
@@ -2344,7 +2344,8 @@ impl Accel for Bvh {
             sah_cost,
         };
         let root_box = bin.first().map_or(Aabb::EMPTY, |n| n.aabb());
-        Bvh { nodes, leaves, prims, root_leaf, root_ref: LEAF, relabeled: false, root_box, stats, avx: has_avx2_fma() }
+        let avx = has_avx2_fma_popcnt();
+        Bvh { nodes, leaves, prims, root_leaf, root_ref: LEAF, relabeled: false, root_box, stats, avx }
     }
 
     fn closest_counted(
@@ -2416,7 +2417,7 @@ impl Accel for Bvh {
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma`).
+            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma_popcnt`).
             return unsafe {
                 if self.fused() {
                     self.closest_avx::<true>(ray, t_max, test, counter)
@@ -2438,7 +2439,7 @@ impl Accel for Bvh {
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma`).
+            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma_popcnt`).
             return unsafe {
                 if self.fused() {
                     self.any_avx::<true>(ray, t_max, test, counter)
@@ -2715,7 +2716,7 @@ mod tests {
             let r = RayPre::new(&Ray::new(o, d), inv);
             #[cfg(target_arch = "x86_64")]
             // SAFETY: AVX2 and FMA were detected.
-            let r_fused = has_avx2_fma().then(|| unsafe { RayPre::new_fused(&Ray::new(o, d), inv) });
+            let r_fused = has_avx2_fma_popcnt().then(|| unsafe { RayPre::new_fused(&Ray::new(o, d), inv) });
             float_path += usize::from(!r.finite);
             let (t, mask) = slab(&n, &r, t_max);
             for (j, &tj) in t.iter().enumerate() {
@@ -2779,7 +2780,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn fused_slab_test_enters_every_box_slab_enters_at_every_scale() {
-        if !has_avx2_fma() {
+        if !has_avx2_fma_popcnt() {
             return;
         }
         let mut rng = Pcg32::new(21, 4);
@@ -2833,7 +2834,7 @@ mod tests {
     /// stack, ties included.
     #[test]
     fn children_placed_by_rank_as_the_insertion_sort_orders_them() {
-        if !has_avx2_fma() {
+        if !has_avx2_fma_popcnt() {
             return;
         }
         let mut rng = Pcg32::new(5, 9);
@@ -2881,7 +2882,7 @@ mod tests {
     /// be tested by one and not the other; on these random boxes that hardly ever happens.
     #[test]
     fn avx_traversal_matches_the_portable_one() {
-        if !has_avx2_fma() {
+        if !has_avx2_fma_popcnt() {
             return;
         }
         let mut rng = Pcg32::new(11, 2);
@@ -2917,7 +2918,7 @@ mod tests {
                         bvh.leaf(leaf).iter().filter_map(|&p| boxes[p as usize].slab(o, inv, 0.0, tm)).reduce(f32::min);
                     best.filter(|&t| t < tm)
                 };
-                // SAFETY: AVX2 and FMA were detected above.
+                // SAFETY: AVX2, FMA and POPCNT were detected above.
                 let hit = match avx {
                     Some(true) => unsafe { bvh.closest_avx::<true>(&ray, &mut t, test, &NoCount) },
                     Some(false) => unsafe { bvh.closest_avx::<false>(&ray, &mut t, test, &NoCount) },
@@ -2933,7 +2934,7 @@ mod tests {
                 let test = |leaf: u32, tm: f32| {
                     bvh.leaf(leaf).iter().any(|&p| boxes[p as usize].slab(o, inv, 0.0, tm).is_some())
                 };
-                // SAFETY: AVX2 and FMA were detected above.
+                // SAFETY: AVX2, FMA and POPCNT were detected above.
                 match avx {
                     Some(true) => unsafe { bvh.any_avx::<true>(&ray, 5.0, test, &NoCount) },
                     Some(false) => unsafe { bvh.any_avx::<false>(&ray, 5.0, test, &NoCount) },

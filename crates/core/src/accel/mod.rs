@@ -20,7 +20,7 @@ use std::fmt;
 use std::str::FromStr;
 
 pub use brute::Brute;
-pub(crate) use bvh::has_avx2_fma;
+pub(crate) use bvh::has_avx2_fma_popcnt;
 pub use bvh::{Bvh, SplitMethod, WIDTH as BVH_WIDTH};
 pub use grid::{Grid, GridParams};
 pub use kdtree::{KdParams, KdTree};

@@ -533,7 +533,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn eight_ray_test_matches_the_block_test_bit_for_bit() {
-        if !crate::accel::has_avx2_fma() {
+        if !crate::accel::has_avx2_fma_popcnt() {
             eprintln!("no AVX2: the eight-ray test is not used on this CPU");
             return;
         }
@@ -610,7 +610,7 @@ mod tests {
     #[test]
     fn eight_ray_setup_is_the_single_ray_setup() {
         use std::arch::x86_64::{_mm256_storeu_ps, _mm_storeu_ps};
-        if !crate::accel::has_avx2_fma() {
+        if !crate::accel::has_avx2_fma_popcnt() {
             eprintln!("no AVX2: the eight-ray set-up is not used on this CPU");
             return;
         }
