@@ -2895,7 +2895,7 @@ mod tests {
             .collect();
         let bvh = Bvh::build(&boxes, &BvhParams { split: SplitMethod::Sah, base: AccelParams::default() });
         assert!(bvh.nodes.len() > 50, "a tree several levels deep");
-        let (mut axis_aligned, mut differ) = (0, 0);
+        let (mut axis_aligned, mut differ, mut many_leaves) = (0, 0, 0);
         for i in 0..4000 {
             let mut o = v() * 14.0 - glam::Vec3::splat(2.0);
             let mut d = v() - glam::Vec3::splat(0.5);
@@ -2942,8 +2942,29 @@ mod tests {
                 }
             };
             assert_eq!((any(Some(true)), any(Some(false))), (any(None), any(None)), "ray {i}");
+            // Where nothing blocks the ray, the any-hit walk reaches every leaf it enters: the
+            // AVX2 walk (the unfused test, `slab`'s arithmetic) in the portable walk's order,
+            // so its pushes drop, repeat and reorder no child.
+            let every_leaf = |avx: bool| {
+                let mut seen = Vec::new();
+                let test = |leaf: u32, _| {
+                    seen.push(leaf);
+                    false
+                };
+                // SAFETY: AVX2, FMA and POPCNT were detected above.
+                let blocked = if avx {
+                    unsafe { bvh.any_avx::<false>(&ray, f32::INFINITY, test, &NoCount) }
+                } else {
+                    bvh.any_walk::<false, false>(&ray, f32::INFINITY, test, &NoCount)
+                };
+                (blocked, seen)
+            };
+            let (avx_leaves, portable_leaves) = (every_leaf(true), every_leaf(false));
+            assert_eq!(avx_leaves, portable_leaves, "ray {i}: the any-hit walks' leaves");
+            many_leaves += usize::from(portable_leaves.1.len() >= 3);
         }
         assert!(axis_aligned > 0);
+        assert!(many_leaves > 1000, "only {many_leaves} rays reach three leaves or more");
         assert!(differ <= 4, "{differ} of 4000 rays visit other leaves or in another order");
     }
 }
