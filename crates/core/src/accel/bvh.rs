@@ -1606,7 +1606,7 @@ impl Bvh {
         false
     }
 
-    /// [`Bvh::closest_walk`] compiled for AVX2 and FMA, the leaf test inlined into it; `FUSED`
+    /// [`Bvh::closest_walk`] compiled for AVX2, FMA and POPCNT, the leaf test inlined into it; `FUSED`
     /// as there.
     ///
     /// # Safety
@@ -1623,7 +1623,7 @@ impl Bvh {
         self.closest_walk::<true, FUSED>(ray, t_max, test, counter)
     }
 
-    /// [`Bvh::any_walk`] compiled for AVX2 and FMA.
+    /// [`Bvh::any_walk`] compiled for AVX2, FMA and POPCNT.
     ///
     /// # Safety
     /// The CPU must support AVX2, FMA and POPCNT.
@@ -2252,7 +2252,7 @@ impl Accel for Bvh {
     ) -> u8 {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma_popcnt`).
+            // SAFETY: `avx` is set only where AVX2, FMA and POPCNT were detected (`has_avx2_fma_popcnt`).
             return unsafe { packet::closest8(self, rays, active, t_max, &mut test) };
         }
         super::lane_by_lane(self, rays, active, t_max, test)
@@ -2267,7 +2267,7 @@ impl Accel for Bvh {
     ) -> [u8; P] {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma_popcnt`).
+            // SAFETY: `avx` is set only where AVX2, FMA and POPCNT were detected (`has_avx2_fma_popcnt`).
             return unsafe { packet::closest_groups(self, rays, active, t_max, &mut test) };
         }
         super::groups_one_by_one(self, rays, active, t_max, test)
@@ -2417,7 +2417,7 @@ impl Accel for Bvh {
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma_popcnt`).
+            // SAFETY: `avx` is set only where AVX2, FMA and POPCNT were detected (`has_avx2_fma_popcnt`).
             return unsafe {
                 if self.fused() {
                     self.closest_avx::<true>(ray, t_max, test, counter)
@@ -2439,7 +2439,7 @@ impl Accel for Bvh {
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where AVX2 and FMA were detected (`has_avx2_fma_popcnt`).
+            // SAFETY: `avx` is set only where AVX2, FMA and POPCNT were detected (`has_avx2_fma_popcnt`).
             return unsafe {
                 if self.fused() {
                     self.any_avx::<true>(ray, t_max, test, counter)
