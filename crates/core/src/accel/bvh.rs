@@ -2880,6 +2880,17 @@ mod tests {
     /// from the portable one's by a few ulps ([`slab_avx`]), so children with almost the same
     /// entry distance may be visited in the other order and a leaf at the edge of a box may
     /// be tested by one and not the other; on these random boxes that hardly ever happens.
+    /// The any-hit walk: `Some(fused)` the AVX2 one (the CPU must have AVX2, FMA and POPCNT),
+    /// `None` the portable one.
+    fn any_walk_with(bvh: &Bvh, ray: &Ray, avx: Option<bool>, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
+        // SAFETY: the callers run only where AVX2, FMA and POPCNT were detected.
+        match avx {
+            Some(true) => unsafe { bvh.any_avx::<true>(ray, t_max, test, &NoCount) },
+            Some(false) => unsafe { bvh.any_avx::<false>(ray, t_max, test, &NoCount) },
+            None => bvh.any_walk::<false, false>(ray, t_max, test, &NoCount),
+        }
+    }
+
     #[test]
     fn avx_traversal_matches_the_portable_one() {
         if !has_avx2_fma_popcnt() {
@@ -2934,32 +2945,21 @@ mod tests {
                 let test = |leaf: u32, tm: f32| {
                     bvh.leaf(leaf).iter().any(|&p| boxes[p as usize].slab(o, inv, 0.0, tm).is_some())
                 };
-                // SAFETY: AVX2, FMA and POPCNT were detected above.
-                match avx {
-                    Some(true) => unsafe { bvh.any_avx::<true>(&ray, 5.0, test, &NoCount) },
-                    Some(false) => unsafe { bvh.any_avx::<false>(&ray, 5.0, test, &NoCount) },
-                    None => bvh.any_walk::<false, false>(&ray, 5.0, test, &NoCount),
-                }
+                any_walk_with(&bvh, &ray, avx, 5.0, test)
             };
             assert_eq!((any(Some(true)), any(Some(false))), (any(None), any(None)), "ray {i}");
             // Where nothing blocks the ray, the any-hit walk reaches every leaf it enters: the
             // AVX2 walk (the unfused test, `slab`'s arithmetic) in the portable walk's order,
             // so its pushes drop, repeat and reorder no child.
-            let every_leaf = |avx: bool| {
+            let every_leaf = |avx: Option<bool>| {
                 let mut seen = Vec::new();
                 let test = |leaf: u32, _| {
                     seen.push(leaf);
                     false
                 };
-                // SAFETY: AVX2, FMA and POPCNT were detected above.
-                let blocked = if avx {
-                    unsafe { bvh.any_avx::<false>(&ray, f32::INFINITY, test, &NoCount) }
-                } else {
-                    bvh.any_walk::<false, false>(&ray, f32::INFINITY, test, &NoCount)
-                };
-                (blocked, seen)
+                (any_walk_with(&bvh, &ray, avx, f32::INFINITY, test), seen)
             };
-            let (avx_leaves, portable_leaves) = (every_leaf(true), every_leaf(false));
+            let (avx_leaves, portable_leaves) = (every_leaf(Some(false)), every_leaf(None));
             assert_eq!(avx_leaves, portable_leaves, "ray {i}: the any-hit walks' leaves");
             many_leaves += usize::from(portable_leaves.1.len() >= 3);
         }
