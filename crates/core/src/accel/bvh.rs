@@ -1606,8 +1606,9 @@ impl Bvh {
         false
     }
 
-    /// [`Bvh::closest_walk`] compiled for AVX2, FMA and POPCNT, the leaf test inlined into it; `FUSED`
-    /// as there.
+    /// [`Bvh::closest_walk`] compiled for AVX2, FMA and POPCNT; `FUSED` as there. The leaf test
+    /// is inlined where the caller's closure asks for it (the top level's object test) and is
+    /// a call otherwise (a mesh's triangle blocks, `TriData::closest`).
     ///
     /// # Safety
     /// The CPU must support AVX2, FMA and POPCNT.
