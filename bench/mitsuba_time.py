@@ -8,7 +8,13 @@ time in seconds per line.
 NAME=VALUE pairs set the scene's <default> parameters (as `snell render -D NAME=VALUE` does).
 Needs `pip install mitsuba` and LLVM (`apt-get install libllvm19`); DRJIT_LIBLLVM_PATH defaults
 to Debian's libLLVM 19.
+
+MITSUBA_ISA=avx2 holds Dr.Jit's compiled kernels to AVX2 and eight lanes (`haswell`), where
+they would otherwise use every instruction set of the CPU (sixteen AVX-512 lanes where it has
+them); Embree, inside Mitsuba, keeps its own choice. It calls Dr.Jit's `jit_llvm_set_target`,
+which the Python bindings do not expose, through ctypes, and fails if the library lacks it.
 """
+import ctypes
 import os
 import sys
 import time
@@ -27,6 +33,17 @@ def main():
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_rgb")
+    isa = os.environ.get("MITSUBA_ISA", "")
+    if isa == "avx2":
+        lib = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+        try:
+            set_target = lib._Z19jit_llvm_set_targetPKcS0_j  # jit_llvm_set_target(cpu, features, width)
+        except AttributeError:
+            sys.exit("MITSUBA_ISA=avx2: this Dr.Jit has no jit_llvm_set_target")
+        set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
+        set_target(b"haswell", b"+avx2,+fma,+f16c,+popcnt,+bmi,+bmi2,+lzcnt", 8)
+    elif isa:
+        sys.exit(f"MITSUBA_ISA={isa}: the only choice is avx2 (unset: every instruction set of the CPU)")
     scene = mi.load_file(path, **params)
     img = mi.render(scene, spp=spp)
     dr.eval(img)

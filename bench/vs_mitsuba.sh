@@ -10,6 +10,7 @@
 # Default binary: target/release/snell (brought up to date first). SNELL_SCENES: the shared test data
 # (default ../shared/scenes). Prints per scene the times and the ratio of Mitsuba's median time
 # to each binary's median (above 1: Snell renders more samples per second).
+# MITSUBA_ISA=avx2 holds Mitsuba's compiled kernels to AVX2's eight lanes (bench/mitsuba_time.py).
 source "$(dirname "$0")/common.sh" "$@"
 set -- "${bins[@]}"
 SPP="${SPP:-64}"
@@ -36,7 +37,7 @@ for scene in "${render_scenes[@]}"; do
     done
     python3 bench/mitsuba_time.py "$scene" "$SPP" 3 "${define[@]}" >> "$mitsuba"
     m=$(median < "$mitsuba")
-    echo "== $(basename "$scene") at $SPP spp: Mitsuba $(sort -n "$mitsuba" | head -1)-$(sort -n "$mitsuba" | tail -1) s (median $m)"
+    echo "== $(basename "$scene") at $SPP spp: Mitsuba${MITSUBA_ISA:+ (kernels held to $MITSUBA_ISA)} $(sort -n "$mitsuba" | head -1)-$(sort -n "$mitsuba" | tail -1) s (median $m)"
     for bin in "$@"; do
         s=$(echo ${times[$bin]} | tr ' ' '\n' | median)
         echo "   $bin:${times[$bin]} s (median $s): $(awk -v m="$m" -v s="$s" 'BEGIN {printf "%.2f", m / s}')x Mitsuba"
