@@ -42,6 +42,11 @@ def main():
             sys.exit("MITSUBA_ISA=avx2: this Dr.Jit has no jit_llvm_set_target")
         set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
         set_target(b"haswell", b"+avx2,+fma,+f16c,+popcnt,+bmi,+bmi2,+lzcnt", 8)
+        # Read back, so that a Dr.Jit that ignored the call is not timed as if it had not.
+        cpu, width = lib._Z19jit_llvm_target_cpuv, lib._Z21jit_llvm_vector_widthv
+        cpu.restype, width.restype = ctypes.c_char_p, ctypes.c_uint32
+        if (cpu(), width()) != (b"haswell", 8):
+            sys.exit(f"MITSUBA_ISA=avx2: Dr.Jit still targets {cpu()!r} with {width()} lanes")
     elif isa:
         sys.exit(f"MITSUBA_ISA={isa}: the only choice is avx2 (unset: every instruction set of the CPU)")
     scene = mi.load_file(path, **params)
