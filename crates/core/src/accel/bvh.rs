@@ -2877,10 +2877,6 @@ mod tests {
         assert!(compared > 10_000);
     }
 
-    /// The AVX2 traversal finds what the portable one finds. Its slab test's distances differ
-    /// from the portable one's by a few ulps ([`slab_avx`]), so children with almost the same
-    /// entry distance may be visited in the other order and a leaf at the edge of a box may
-    /// be tested by one and not the other; on these random boxes that hardly ever happens.
     /// The any-hit walk: `Some(fused)` the AVX2 one (the CPU must have AVX2, FMA and POPCNT),
     /// `None` the portable one.
     fn any_walk_with(bvh: &Bvh, ray: &Ray, avx: Option<bool>, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
@@ -2892,6 +2888,10 @@ mod tests {
         }
     }
 
+    /// The AVX2 traversal finds what the portable one finds. Its slab test's distances differ
+    /// from the portable one's by a few ulps ([`slab_avx`]), so children with almost the same
+    /// entry distance may be visited in the other order and a leaf at the edge of a box may
+    /// be tested by one and not the other; on these random boxes that hardly ever happens.
     #[test]
     fn avx_traversal_matches_the_portable_one() {
         if !has_avx2_fma_popcnt() {
