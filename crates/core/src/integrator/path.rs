@@ -450,7 +450,7 @@ impl Integrator for Path {
 
     /// The paths of up to eight camera samples in lockstep: each live path's vertex up to its
     /// random numbers, then the Lambertian vertices' light samples, shadow rays and BSDF
-    /// samples worked out together in vector lanes ([`DiffuseLanes`], where the CPU has AVX2)
+    /// samples worked out together in vector lanes (`DiffuseLanes`, where the CPU has AVX2)
     /// and the other vertices one by one, then every live path's next segment traced. Each
     /// path draws its numbers and does its arithmetic as [`Integrator::radiance`] does, so the
     /// image is the same bits (and thread counts still do not change it).
