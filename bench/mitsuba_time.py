@@ -35,15 +35,15 @@ def main():
     mi.set_variant("llvm_ad_rgb")
     isa = os.environ.get("MITSUBA_ISA", "")
     if isa == "avx2":
-        lib = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
         try:
+            lib = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
             set_target = lib._Z19jit_llvm_set_targetPKcS0_j  # jit_llvm_set_target(cpu, features, width)
-        except AttributeError:
-            sys.exit("MITSUBA_ISA=avx2: this Dr.Jit has no jit_llvm_set_target")
+            # Read back after the call, so that a Dr.Jit that ignored it is not timed as if it had not.
+            cpu, width = lib._Z19jit_llvm_target_cpuv, lib._Z21jit_llvm_vector_widthv
+        except (OSError, AttributeError) as e:
+            sys.exit(f"MITSUBA_ISA=avx2: cannot reach Dr.Jit's LLVM target functions ({e})")
         set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
         set_target(b"haswell", b"+avx2,+fma,+f16c,+popcnt,+bmi,+bmi2,+lzcnt", 8)
-        # Read back, so that a Dr.Jit that ignored the call is not timed as if it had not.
-        cpu, width = lib._Z19jit_llvm_target_cpuv, lib._Z21jit_llvm_vector_widthv
         cpu.restype, width.restype = ctypes.c_char_p, ctypes.c_uint32
         if (cpu(), width()) != (b"haswell", 8):
             sys.exit(f"MITSUBA_ISA=avx2: Dr.Jit still targets {cpu()!r} with {width()} lanes")
