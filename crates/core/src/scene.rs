@@ -7,7 +7,7 @@ use crate::accel::{Accel, BuildParams, Counter, NoCount};
 use crate::camera::Camera;
 use crate::geometry::{spawn_ray, spawn_ray_to, Aabb, Ray, Transform};
 use crate::light::{AreaLight, AreaShape, Light, LightSample};
-use crate::material::Material;
+use crate::material::{Material, Texture};
 use crate::sampling::build_cdf;
 use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Ray4, Reentry, Sphere, Tri4, TriHit, WatertightRay};
 use crate::Rgb;
@@ -222,6 +222,32 @@ pub struct RawHit {
 /// anywhere else, as [`World::leaving`] finds them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Skip([u32; 2]);
+
+/// An object's surface as a path vertex first reads it: one record, where the object, its
+/// material (behind a box where one-sided) and the material's texture were three or four
+/// dependent loads and matches at every vertex.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Surface {
+    /// The object's emission (black: none).
+    pub emission: Rgb,
+    /// Whether its material reflects from behind ([`Material::two_sided`]).
+    pub two_sided: bool,
+    /// Where the material is Lambertian with one albedo everywhere, that albedo: the BSDF
+    /// [`Material::bsdf`] gives at every point.
+    pub diffuse: Option<Rgb>,
+    /// The material's index in the scene, for every other material.
+    pub material: usize,
+}
+
+impl Surface {
+    fn new(o: &Object, material: &Material) -> Surface {
+        let diffuse = match material.surface() {
+            Material::Diffuse { albedo: Texture::Constant(c) } => Some(*c),
+            _ => None,
+        };
+        Surface { emission: o.emission, two_sided: material.two_sided(), diffuse, material: o.material }
+    }
+}
 
 /// No object (in [`Skip`]).
 const NO_OBJECT: u32 = u32::MAX;
@@ -636,6 +662,8 @@ pub struct World<'s, A: Accel> {
     object_blocks: Vec<(u32, u32, u32)>,
     /// Per object, whether a ray leaving its surface can meet it again (see [`World::leaving`]).
     reentry: Vec<Reentry>,
+    /// Per object, what a path vertex on it reads first (see [`Surface`]).
+    pub(crate) surfaces: Vec<Surface>,
     /// Whether the top level's leaf references are the objects themselves
     /// ([`Accel::relabel_leaves`]; every leaf holds one object), so that its leaf-level query
     /// hands the object straight to the test.
@@ -736,6 +764,7 @@ impl<'s, A: Accel> World<'s, A> {
                 }
             })
             .collect::<Vec<_>>();
+        let surfaces = scene.objects.iter().map(|o| Surface::new(o, &scene.materials[o.material])).collect();
         let mut lights = scene.lights.clone();
         let mut object_light = vec![u32::MAX; scene.objects.len()];
         for (i, o) in scene.objects.iter().enumerate() {
@@ -775,6 +804,7 @@ impl<'s, A: Accel> World<'s, A> {
             object_meshes,
             object_blocks,
             reentry,
+            surfaces,
             top_by_object,
             lights,
             light_cdf,

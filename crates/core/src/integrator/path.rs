@@ -293,7 +293,7 @@ impl Path {
             }
             return None;
         };
-        let obj = &scene.objects[hit.object as usize];
+        let surface = &world.surfaces[hit.object as usize];
         // Unit already (to rounding): cameras normalize their rays, and each later segment
         // is a BSDF sample's unit direction taken out of its frame. Normalizing it again put a
         // square root and a division on the chain from one hit to the next (Cornell box 1 %).
@@ -305,7 +305,7 @@ impl Path {
         );
         let wo_world = -st.dir;
         let front = wo_world.dot(hit.ng) > 0.0;
-        if front && obj.emission != Rgb::ZERO {
+        if front && surface.emission != Rgb::ZERO {
             let w = match (st.prev_delta, world.light_of(hit.object)) {
                 (false, Some(li)) => {
                     let light_pdf = world.light_probability(li) * world.lights[li].pdf(st.prev_p, hit.p, hit.ng);
@@ -313,16 +313,18 @@ impl Path {
                 }
                 _ => 1.0,
             };
-            st.l += st.beta * Vec3A::from(obj.emission) * w;
+            st.l += st.beta * Vec3A::from(surface.emission) * w;
         }
         if st.depth + 1 >= self.max_depth {
             return None;
         }
-        let material = &scene.materials[obj.material];
-        if !material.two_sided() && !front {
+        if !surface.two_sided && !front {
             return None; // The back of a one-sided surface reflects nothing.
         }
-        let bsdf = material.bsdf(hit.uv);
+        let bsdf = match surface.diffuse {
+            Some(albedo) => Bsdf::Diffuse { albedo },
+            None => scene.materials[surface.material].bsdf(hit.uv),
+        };
         // Opaque surfaces are two-sided: turn the frame to the side the path arrives from.
         // Dielectrics keep the outward normal, whose side tells inside from outside.
         let (mut ng, mut ns) = (hit.ng, hit.ns);
