@@ -671,6 +671,9 @@ pub struct World<'s, A: Accel> {
     pub lights: Vec<Light>,
     /// Running sum of the lights' powers, for choosing one in proportion to its power.
     light_cdf: Vec<f32>,
+    /// Per light, the probability of choosing it (worked out once: a division that sat on
+    /// every light sample's path).
+    light_pmf: Vec<f32>,
     /// Per object, the index of its area light in `lights` (`u32::MAX`: not emissive).
     object_light: Vec<u32>,
     /// Per light, the object a shadow ray ending on it may pass over (`NO_OBJECT` where that
@@ -786,6 +789,17 @@ impl<'s, A: Accel> World<'s, A> {
                 0.0
             }
         }));
+        let total = light_cdf.last().copied().unwrap_or(0.0);
+        let light_pmf = (0..light_cdf.len())
+            .map(|i| {
+                let lo = if i == 0 { 0.0 } else { light_cdf[i - 1] };
+                if total > 0.0 {
+                    (light_cdf[i] - lo) / total
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let light_object = lights
             .iter()
             .map(|l| match l {
@@ -808,6 +822,7 @@ impl<'s, A: Accel> World<'s, A> {
             top_by_object,
             lights,
             light_cdf,
+            light_pmf,
             object_light,
             light_object,
             environment,
@@ -843,14 +858,9 @@ impl<'s, A: Accel> World<'s, A> {
     }
 
     /// The probability that [`World::choose_light`] picks light `i`.
+    #[inline]
     pub fn light_probability(&self, i: usize) -> f32 {
-        let total = self.light_cdf.last().copied().unwrap_or(0.0);
-        let lo = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
-        if total > 0.0 {
-            (self.light_cdf[i] - lo) / total
-        } else {
-            0.0
-        }
+        self.light_pmf[i]
     }
 
     /// What a query for a ray from `p`, a point on object `obj`'s surface whose geometric normal
