@@ -1480,6 +1480,51 @@ mod tests {
         assert_eq!(label_of_range((1 << 27) - 1, 1 << 27), None);
     }
 
+    /// The record a path vertex reads gives the BSDF, the sidedness and the emission that the
+    /// object and its material give, and leaves every other material to `Material::bsdf`.
+    #[test]
+    fn surfaces_give_what_their_materials_give() {
+        use crate::material::bsdf::Bsdf;
+        use crate::material::microfacet::Distribution;
+        let albedo = Rgb::new(0.5, 0.25, 0.125);
+        let checker = Texture::Checker { a: Rgb::ONE, b: Rgb::ZERO, scale: 4.0 };
+        let materials = vec![
+            Material::Diffuse { albedo: Texture::Constant(albedo) },
+            Material::OneSided(Box::new(Material::Diffuse { albedo: Texture::Constant(albedo) })),
+            Material::Diffuse { albedo: checker.clone() },
+            Material::OneSided(Box::new(Material::Diffuse { albedo: checker })),
+            Material::plastic(Texture::Constant(albedo), Rgb::ONE, 1.5, 0.0, Distribution::Ggx),
+            Material::Mirror { reflectance: Rgb::ONE },
+        ];
+        let objects: Vec<Object> = (0..materials.len())
+            .map(|i| Object {
+                geometry: 0,
+                transform: None,
+                material: i,
+                emission: if i == 1 { Rgb::new(2.0, 3.0, 4.0) } else { Rgb::ZERO },
+                light_samples: 1,
+            })
+            .collect();
+        let scene = scene_of(vec![Geometry::Mesh(quad(Vec3::ZERO, Vec3::X, Vec3::Y))], objects, materials);
+        let world: World<crate::accel::Brute> = World::build(&scene, &crate::accel::AccelParams::default());
+        let diffuse = [Some(albedo), Some(albedo), None, None, None, None];
+        for (i, (s, o)) in world.surfaces.iter().zip(&scene.objects).enumerate() {
+            let m = &scene.materials[o.material];
+            assert_eq!(s.emission, o.emission, "object {i}");
+            assert_eq!(s.two_sided, m.two_sided(), "object {i}");
+            assert_eq!(s.material, o.material, "object {i}");
+            assert_eq!(s.diffuse, diffuse[i], "object {i}");
+            if let Some(a) = s.diffuse {
+                for uv in [Vec2::ZERO, Vec2::new(0.3, 0.7), Vec2::new(0.9, 0.1)] {
+                    match m.bsdf(uv) {
+                        Bsdf::Diffuse { albedo } => assert_eq!(albedo, a, "object {i} at {uv}"),
+                        other => panic!("object {i}: {other:?}"),
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn emitting_rectangles_are_sampled_as_rectangles() {
         let shape = |m: Mesh, transform: Option<Transform>| {
