@@ -475,6 +475,22 @@ pub fn sample_cdf(cdf: &[f32], u: f32) -> (usize, f32) {
     (i, if w > 0.0 { ((x - lo) / w).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 })
 }
 
+/// Each index's probability under [`sample_cdf`] with this `cdf`: its weight over the sum
+/// (every one 0 where the sum is not positive).
+pub fn cdf_probabilities(cdf: &[f32]) -> Vec<f32> {
+    let total = cdf.last().copied().unwrap_or(0.0);
+    (0..cdf.len())
+        .map(|i| {
+            let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
+            if total > 0.0 {
+                (cdf[i] - lo) / total
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
 /// Running sums of `weights` (the unnormalised CDF).
 pub fn build_cdf(weights: impl IntoIterator<Item = f32>) -> Vec<f32> {
     let mut acc = 0.0f64;

@@ -7,7 +7,7 @@ use crate::accel::{Accel, BuildParams, Counter, NoCount};
 use crate::camera::Camera;
 use crate::geometry::{spawn_ray, spawn_ray_to, Aabb, Ray, Transform};
 use crate::light::{AreaLight, AreaShape, Light, LightSample};
-use crate::material::{Material, Texture};
+use crate::material::Material;
 use crate::sampling::build_cdf;
 use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Ray4, Reentry, Sphere, Tri4, TriHit, WatertightRay};
 use crate::Rgb;
@@ -241,11 +241,12 @@ pub(crate) struct Surface {
 
 impl Surface {
     fn new(o: &Object, material: &Material) -> Surface {
-        let diffuse = match material.surface() {
-            Material::Diffuse { albedo: Texture::Constant(c) } => Some(*c),
-            _ => None,
-        };
-        Surface { emission: o.emission, two_sided: material.two_sided(), diffuse, material: o.material }
+        Surface {
+            emission: o.emission,
+            two_sided: material.two_sided(),
+            diffuse: material.uniform_diffuse(),
+            material: o.material,
+        }
     }
 }
 
@@ -789,17 +790,7 @@ impl<'s, A: Accel> World<'s, A> {
                 0.0
             }
         }));
-        let total = light_cdf.last().copied().unwrap_or(0.0);
-        let light_pmf = (0..light_cdf.len())
-            .map(|i| {
-                let lo = if i == 0 { 0.0 } else { light_cdf[i - 1] };
-                if total > 0.0 {
-                    (light_cdf[i] - lo) / total
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let light_pmf = crate::sampling::cdf_probabilities(&light_cdf);
         let light_object = lights
             .iter()
             .map(|l| match l {
@@ -1486,6 +1477,7 @@ mod tests {
     fn surfaces_give_what_their_materials_give() {
         use crate::material::bsdf::Bsdf;
         use crate::material::microfacet::Distribution;
+        use crate::material::Texture;
         let albedo = Rgb::new(0.5, 0.25, 0.125);
         let checker = Texture::Checker { a: Rgb::ONE, b: Rgb::ZERO, scale: 4.0 };
         let materials = vec![

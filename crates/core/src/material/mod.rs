@@ -71,6 +71,14 @@ impl ImageTexture {
 }
 
 impl Texture {
+    /// The colour, where it is the same at every point.
+    pub fn constant(&self) -> Option<Rgb> {
+        match self {
+            Texture::Constant(c) => Some(*c),
+            _ => None,
+        }
+    }
+
     /// The average colour over the texture.
     pub fn mean(&self) -> Rgb {
         match self {
@@ -180,6 +188,15 @@ impl Material {
             }
             Material::ThinDielectric { ior, transmittance } => Bsdf::ThinDielectric { eta: *ior, tint: *transmittance },
             Material::OneSided(_) => Bsdf::Diffuse { albedo: Rgb::ZERO }, // `surface` unwraps it
+        }
+    }
+
+    /// The albedo of a Lambertian material that is the same at every point: where this is
+    /// `Some(albedo)`, [`Material::bsdf`] gives `Bsdf::Diffuse { albedo }` at every `uv`.
+    pub fn uniform_diffuse(&self) -> Option<Rgb> {
+        match self.surface() {
+            Material::Diffuse { albedo } => albedo.constant(),
+            _ => None,
         }
     }
 
