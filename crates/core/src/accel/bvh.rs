@@ -314,6 +314,9 @@ pub struct Bvh {
     /// Whether this CPU has AVX2: single rays then test a node's eight boxes in one register,
     /// and packets run in AVX2 lanes.
     avx: bool,
+    /// Whether it has AVX-512 as well ([`has_avx512`]): the walks of
+    /// [`Accel::closest_leaf_inlined`] and [`Accel::any_leaf_inlined`] then run.
+    avx512: bool,
 }
 
 /// Whether the CPU running this has AVX2, FMA and POPCNT (checked once per build; every CPU
@@ -324,6 +327,22 @@ pub(crate) fn has_avx2_fma_popcnt() -> bool {
         std::arch::is_x86_feature_detected!("avx2")
             && std::arch::is_x86_feature_detected!("fma")
             && std::arch::is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// Whether the CPU running this has AVX-512 (F, VL, BW and DQ) besides AVX2, FMA and POPCNT:
+/// the walks then have 32 vector registers, enough to keep the ray's constants in registers
+/// across a leaf test inlined into the walk ([`Accel::closest_leaf_inlined`]).
+pub(crate) fn has_avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        has_avx2_fma_popcnt()
+            && std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+            && std::arch::is_x86_feature_detected!("avx512dq")
     }
     #[cfg(not(target_arch = "x86_64"))]
     false
@@ -1639,6 +1658,43 @@ impl Bvh {
     ) -> bool {
         self.any_walk::<true, FUSED>(ray, t_max, test, counter)
     }
+
+    /// [`Bvh::closest_walk`] compiled with AVX-512 as well, for a leaf test inlined into it
+    /// ([`Accel::closest_leaf_inlined`]): the walk is [`Bvh::closest_avx`]'s (the same 256-bit
+    /// slab test, so the same leaves in the same order), but with 32 vector registers the
+    /// ray's constants stay in them across the leaf test, where with AVX2's 16 an inlined leaf
+    /// test pushed them to memory (the fortieth session) and a called one reloads them after
+    /// every leaf.
+    ///
+    /// # Safety
+    /// The CPU must support what [`has_avx512`] checks.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,popcnt,avx512f,avx512vl,avx512bw,avx512dq")]
+    unsafe fn closest_avx512<const FUSED: bool>(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        self.closest_walk::<true, FUSED>(ray, t_max, test, counter)
+    }
+
+    /// [`Bvh::any_walk`] compiled with AVX-512 as well, as [`Bvh::closest_avx512`].
+    ///
+    /// # Safety
+    /// The CPU must support what [`has_avx512`] checks.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,popcnt,avx512f,avx512vl,avx512bw,avx512dq")]
+    unsafe fn any_avx512<const FUSED: bool>(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
+        self.any_walk::<true, FUSED>(ray, t_max, test, counter)
+    }
 }
 
 /// Packet traversal: eight rays against a node's four boxes at once in AVX2 lanes, the node
@@ -2345,8 +2401,8 @@ impl Accel for Bvh {
             sah_cost,
         };
         let root_box = bin.first().map_or(Aabb::EMPTY, |n| n.aabb());
-        let avx = has_avx2_fma_popcnt();
-        Bvh { nodes, leaves, prims, root_leaf, root_ref: LEAF, relabeled: false, root_box, stats, avx }
+        let (avx, avx512) = (has_avx2_fma_popcnt(), has_avx512());
+        Bvh { nodes, leaves, prims, root_leaf, root_ref: LEAF, relabeled: false, root_box, stats, avx, avx512 }
     }
 
     fn closest_counted(
@@ -2446,6 +2502,55 @@ impl Accel for Bvh {
                     self.any_avx::<true>(ray, t_max, test, counter)
                 } else {
                     self.any_avx::<false>(ray, t_max, test, counter)
+                }
+            };
+        }
+        self.any_walk::<false, false>(ray, t_max, test, counter)
+    }
+
+    fn inlines_leaves(&self) -> bool {
+        self.avx512
+    }
+
+    #[inline(always)]
+    fn closest_leaf_inlined(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx512 {
+            // SAFETY: `avx512` is set only where `has_avx512` found what the walk needs.
+            return unsafe {
+                if self.fused() {
+                    self.closest_avx512::<true>(ray, t_max, test, counter)
+                } else {
+                    self.closest_avx512::<false>(ray, t_max, test, counter)
+                }
+            };
+        }
+        // (Callers ask only where `inlines_leaves` says so; the portable walk is right anyway.)
+        self.closest_walk::<false, false>(ray, t_max, test, counter)
+    }
+
+    #[inline(always)]
+    fn any_leaf_inlined(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx512 {
+            // SAFETY: as in `closest_leaf_inlined`.
+            return unsafe {
+                if self.fused() {
+                    self.any_avx512::<true>(ray, t_max, test, counter)
+                } else {
+                    self.any_avx512::<false>(ray, t_max, test, counter)
                 }
             };
         }
@@ -2877,14 +2982,51 @@ mod tests {
         assert!(compared > 10_000);
     }
 
-    /// The any-hit walk: `Some(fused)` the AVX2 one (the CPU must have AVX2, FMA and POPCNT),
-    /// `None` the portable one.
-    fn any_walk_with(bvh: &Bvh, ray: &Ray, avx: Option<bool>, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
-        // SAFETY: the callers run only where AVX2, FMA and POPCNT were detected.
-        match avx {
-            Some(true) => unsafe { bvh.any_avx::<true>(ray, t_max, test, &NoCount) },
-            Some(false) => unsafe { bvh.any_avx::<false>(ray, t_max, test, &NoCount) },
-            None => bvh.any_walk::<false, false>(ray, t_max, test, &NoCount),
+    /// Which compilation of the walks a test runs.
+    #[derive(Clone, Copy, Debug)]
+    enum Walk {
+        Portable,
+        /// The CPU must have AVX2, FMA and POPCNT.
+        Avx2 {
+            fused: bool,
+        },
+        /// The CPU must have what [`has_avx512`] checks.
+        Avx512 {
+            fused: bool,
+        },
+    }
+
+    /// The closest-hit walk `walk`: whether it hit, and the bound it lowered `t` to.
+    fn closest_walk_with(
+        bvh: &Bvh,
+        ray: &Ray,
+        walk: Walk,
+        t: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+    ) -> bool {
+        // SAFETY: the callers ask for a compiled walk only where its features were detected.
+        unsafe {
+            match walk {
+                Walk::Portable => bvh.closest_walk::<false, false>(ray, t, test, &NoCount),
+                Walk::Avx2 { fused: true } => bvh.closest_avx::<true>(ray, t, test, &NoCount),
+                Walk::Avx2 { fused: false } => bvh.closest_avx::<false>(ray, t, test, &NoCount),
+                Walk::Avx512 { fused: true } => bvh.closest_avx512::<true>(ray, t, test, &NoCount),
+                Walk::Avx512 { fused: false } => bvh.closest_avx512::<false>(ray, t, test, &NoCount),
+            }
+        }
+    }
+
+    /// The any-hit walk `walk`.
+    fn any_walk_with(bvh: &Bvh, ray: &Ray, walk: Walk, t_max: f32, test: impl FnMut(u32, f32) -> bool) -> bool {
+        // SAFETY: as in `closest_walk_with`.
+        unsafe {
+            match walk {
+                Walk::Portable => bvh.any_walk::<false, false>(ray, t_max, test, &NoCount),
+                Walk::Avx2 { fused: true } => bvh.any_avx::<true>(ray, t_max, test, &NoCount),
+                Walk::Avx2 { fused: false } => bvh.any_avx::<false>(ray, t_max, test, &NoCount),
+                Walk::Avx512 { fused: true } => bvh.any_avx512::<true>(ray, t_max, test, &NoCount),
+                Walk::Avx512 { fused: false } => bvh.any_avx512::<false>(ray, t_max, test, &NoCount),
+            }
         }
     }
 
@@ -2892,11 +3034,14 @@ mod tests {
     /// from the portable one's by a few ulps ([`slab_avx`]), so children with almost the same
     /// entry distance may be visited in the other order and a leaf at the edge of a box may
     /// be tested by one and not the other; on these random boxes that hardly ever happens.
+    /// Where the CPU has AVX-512, its copies of the AVX2 walks reach the same leaves in the
+    /// same order.
     #[test]
     fn avx_traversal_matches_the_portable_one() {
         if !has_avx2_fma_popcnt() {
             return;
         }
+        let avx512 = has_avx512();
         let mut rng = Pcg32::new(11, 2);
         let mut v = || glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
         let boxes: Vec<Aabb> = (0..3000)
@@ -2920,8 +3065,7 @@ mod tests {
             }
             let ray = Ray::new(o, d);
             let inv = d.recip();
-            // `Some(fused)`: the AVX2 walk.
-            let walk = |avx: Option<bool>| {
+            let walk = |walk: Walk| {
                 let mut seen = Vec::new();
                 let mut t = f32::INFINITY;
                 let test = |leaf: u32, tm: f32| {
@@ -2930,37 +3074,48 @@ mod tests {
                         bvh.leaf(leaf).iter().filter_map(|&p| boxes[p as usize].slab(o, inv, 0.0, tm)).reduce(f32::min);
                     best.filter(|&t| t < tm)
                 };
-                // SAFETY: AVX2, FMA and POPCNT were detected above.
-                let hit = match avx {
-                    Some(true) => unsafe { bvh.closest_avx::<true>(&ray, &mut t, test, &NoCount) },
-                    Some(false) => unsafe { bvh.closest_avx::<false>(&ray, &mut t, test, &NoCount) },
-                    None => bvh.closest_walk::<false, false>(&ray, &mut t, test, &NoCount),
-                };
+                let hit = closest_walk_with(&bvh, &ray, walk, &mut t, test);
                 (hit, t.to_bits(), seen)
             };
-            let (fused, unfused, portable) = (walk(Some(true)), walk(Some(false)), walk(None));
+            let fused = walk(Walk::Avx2 { fused: true });
+            let unfused = walk(Walk::Avx2 { fused: false });
+            let portable = walk(Walk::Portable);
             assert_eq!(unfused, portable, "ray {i}: the unfused test is `slab`'s arithmetic");
             assert_eq!((fused.0, fused.1), (portable.0, portable.1), "ray {i}");
             differ += usize::from(fused.2 != portable.2);
-            let any = |avx: Option<bool>| {
+            // Leaves reached, in order, and whether one blocks the ray within 5.
+            let any = |walk: Walk| {
+                let mut seen = Vec::new();
                 let test = |leaf: u32, tm: f32| {
+                    seen.push(leaf);
                     bvh.leaf(leaf).iter().any(|&p| boxes[p as usize].slab(o, inv, 0.0, tm).is_some())
                 };
-                any_walk_with(&bvh, &ray, avx, 5.0, test)
+                (any_walk_with(&bvh, &ray, walk, 5.0, test), seen)
             };
-            assert_eq!((any(Some(true)), any(Some(false))), (any(None), any(None)), "ray {i}");
+            let blocked = any(Walk::Portable).0;
+            assert_eq!(any(Walk::Avx2 { fused: true }).0, blocked, "ray {i}");
+            assert_eq!(any(Walk::Avx2 { fused: false }).0, blocked, "ray {i}");
+            if avx512 {
+                // The AVX-512 copies are the AVX2 walks compiled with more registers: the same
+                // leaves in the same order, with the same bounds.
+                for fused in [true, false] {
+                    let (wide, avx2) = (Walk::Avx512 { fused }, Walk::Avx2 { fused });
+                    assert_eq!(walk(wide), walk(avx2), "ray {i}: {wide:?}");
+                    assert_eq!(any(wide), any(avx2), "ray {i}: {wide:?}");
+                }
+            }
             // Where nothing blocks the ray, the any-hit walk reaches every leaf it enters: the
             // AVX2 walk (the unfused test, `slab`'s arithmetic) in the portable walk's order,
             // so its pushes drop, repeat and reorder no child.
-            let every_leaf = |avx: Option<bool>| {
+            let every_leaf = |walk: Walk| {
                 let mut seen = Vec::new();
                 let test = |leaf: u32, _| {
                     seen.push(leaf);
                     false
                 };
-                (any_walk_with(&bvh, &ray, avx, f32::INFINITY, test), seen)
+                (any_walk_with(&bvh, &ray, walk, f32::INFINITY, test), seen)
             };
-            let (avx_leaves, portable_leaves) = (every_leaf(Some(false)), every_leaf(None));
+            let (avx_leaves, portable_leaves) = (every_leaf(Walk::Avx2 { fused: false }), every_leaf(Walk::Portable));
             assert_eq!(avx_leaves, portable_leaves, "ray {i}: the any-hit walks' leaves");
             many_leaves += usize::from(portable_leaves.1.len() >= 3);
         }

@@ -116,6 +116,38 @@ pub trait Accel: Send + Sync + Sized {
         self.any_counted(ray, t_max, test, counter)
     }
 
+    /// Whether [`Accel::closest_leaf_inlined`] and [`Accel::any_leaf_inlined`] have a walk of
+    /// their own, with room for a leaf test inlined into it; callers then pass them a leaf
+    /// test marked `#[inline(always)]`, and call the `_counted` queries otherwise.
+    fn inlines_leaves(&self) -> bool {
+        false
+    }
+
+    /// [`Accel::closest_leaf_counted`] for a leaf test to be inlined into the walk, where
+    /// [`Accel::inlines_leaves`] says there is a walk for it (the BVH's, compiled with
+    /// AVX-512's 32 vector registers). The same leaves in the same order.
+    fn closest_leaf_inlined(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        self.closest_leaf_counted(ray, t_max, test, counter)
+    }
+
+    /// [`Accel::any_leaf_counted`] for a leaf test to be inlined into the walk (see
+    /// [`Accel::closest_leaf_inlined`]).
+    fn any_leaf_inlined(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
+        self.any_leaf_counted(ray, t_max, test, counter)
+    }
+
     /// Closest hits of a packet of up to eight rays traced together (for coherent rays such
     /// as camera rays): `active` selects the lanes, `t_max` is each lane's bound (updated),
     /// and `test(leaf, lanes, t_max)` tests the rays of the `lanes` mask against a leaf,
