@@ -1695,6 +1695,55 @@ impl Bvh {
     ) -> bool {
         self.any_walk::<true, FUSED>(ray, t_max, test, counter)
     }
+
+    /// The closest-hit walk for this CPU: with `INLINED` (a leaf test meant to be inlined,
+    /// [`Accel::closest_leaf_inlined`]) the AVX-512 copy where the CPU has it; otherwise the
+    /// AVX2 walk where it has that; otherwise the portable one.
+    #[inline(always)]
+    fn closest_on_cpu<const INLINED: bool>(
+        &self,
+        ray: &Ray,
+        t_max: &mut f32,
+        test: impl FnMut(u32, f32) -> Option<f32>,
+        counter: &impl Counter,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `avx512` and `avx` are set only where `has_avx512` and `has_avx2_fma_popcnt`
+        // found what those walks are compiled for.
+        unsafe {
+            match (INLINED && self.avx512, self.avx, self.fused()) {
+                (true, _, true) => return self.closest_avx512::<true>(ray, t_max, test, counter),
+                (true, _, false) => return self.closest_avx512::<false>(ray, t_max, test, counter),
+                (false, true, true) => return self.closest_avx::<true>(ray, t_max, test, counter),
+                (false, true, false) => return self.closest_avx::<false>(ray, t_max, test, counter),
+                (false, false, _) => {}
+            }
+        }
+        self.closest_walk::<false, false>(ray, t_max, test, counter)
+    }
+
+    /// The any-hit walk for this CPU, chosen as in [`Bvh::closest_on_cpu`].
+    #[inline(always)]
+    fn any_on_cpu<const INLINED: bool>(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        test: impl FnMut(u32, f32) -> bool,
+        counter: &impl Counter,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `closest_on_cpu`.
+        unsafe {
+            match (INLINED && self.avx512, self.avx, self.fused()) {
+                (true, _, true) => return self.any_avx512::<true>(ray, t_max, test, counter),
+                (true, _, false) => return self.any_avx512::<false>(ray, t_max, test, counter),
+                (false, true, true) => return self.any_avx::<true>(ray, t_max, test, counter),
+                (false, true, false) => return self.any_avx::<false>(ray, t_max, test, counter),
+                (false, false, _) => {}
+            }
+        }
+        self.any_walk::<false, false>(ray, t_max, test, counter)
+    }
 }
 
 /// Packet traversal: eight rays against a node's four boxes at once in AVX2 lanes, the node
@@ -2472,18 +2521,7 @@ impl Accel for Bvh {
         test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx {
-            // SAFETY: `avx` is set only where AVX2, FMA and POPCNT were detected (`has_avx2_fma_popcnt`).
-            return unsafe {
-                if self.fused() {
-                    self.closest_avx::<true>(ray, t_max, test, counter)
-                } else {
-                    self.closest_avx::<false>(ray, t_max, test, counter)
-                }
-            };
-        }
-        self.closest_walk::<false, false>(ray, t_max, test, counter)
+        self.closest_on_cpu::<false>(ray, t_max, test, counter)
     }
 
     #[inline(always)]
@@ -2494,18 +2532,7 @@ impl Accel for Bvh {
         test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx {
-            // SAFETY: `avx` is set only where AVX2, FMA and POPCNT were detected (`has_avx2_fma_popcnt`).
-            return unsafe {
-                if self.fused() {
-                    self.any_avx::<true>(ray, t_max, test, counter)
-                } else {
-                    self.any_avx::<false>(ray, t_max, test, counter)
-                }
-            };
-        }
-        self.any_walk::<false, false>(ray, t_max, test, counter)
+        self.any_on_cpu::<false>(ray, t_max, test, counter)
     }
 
     fn inlines_leaves(&self) -> bool {
@@ -2520,19 +2547,7 @@ impl Accel for Bvh {
         test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx512 {
-            // SAFETY: `avx512` is set only where `has_avx512` found what the walk needs.
-            return unsafe {
-                if self.fused() {
-                    self.closest_avx512::<true>(ray, t_max, test, counter)
-                } else {
-                    self.closest_avx512::<false>(ray, t_max, test, counter)
-                }
-            };
-        }
-        // (Callers ask only where `inlines_leaves` says so; the portable walk is right anyway.)
-        self.closest_walk::<false, false>(ray, t_max, test, counter)
+        self.closest_on_cpu::<true>(ray, t_max, test, counter)
     }
 
     #[inline(always)]
@@ -2543,18 +2558,7 @@ impl Accel for Bvh {
         test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx512 {
-            // SAFETY: as in `closest_leaf_inlined`.
-            return unsafe {
-                if self.fused() {
-                    self.any_avx512::<true>(ray, t_max, test, counter)
-                } else {
-                    self.any_avx512::<false>(ray, t_max, test, counter)
-                }
-            };
-        }
-        self.any_walk::<false, false>(ray, t_max, test, counter)
+        self.any_on_cpu::<true>(ray, t_max, test, counter)
     }
 
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {
