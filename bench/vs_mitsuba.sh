@@ -30,7 +30,9 @@ for scene in "${render_scenes[@]}"; do
     declare -A times=()
     for round in $(seq 1 "$ROUNDS"); do
         python3 bench/mitsuba_time.py "$scene" "$SPP" 3 "${define[@]}" >> "$mitsuba"
-        for bin in "$@"; do
+        # The binaries take turns at going first (see vs_embree.sh).
+        for j in $(seq 0 $(($# - 1))); do
+            bin=${bins[$(((j + round - 1) % $#))]}
             t=$(render_time "$bin" "$scene" --spp "$SPP")
             times[$bin]="${times[$bin]:-} $t"
         done
