@@ -536,19 +536,13 @@ impl TriData {
                     }
                 } else {
                     // Inlined into the walk where it has the registers for it (AVX-512's 32:
-                    // bounce rays 2-5 % faster, any-hit 1-8 %, forty-eighth session). Elsewhere
-                    // a call (see `World::hit_skipping`): the AVX2 walk gets a closure of its
-                    // own around `test`, as `test` itself would be inlined there too.
-                    let mut test = {
+                    // bounce rays 2-5 % faster, any-hit 1-8 %, forty-eighth session); a call
+                    // from the AVX2 walk (see `World::hit_skipping`).
+                    let test = {
                         #[inline(always)]
                         |l, tm| leaf(TriData::leaf_blocks(blocks, ranges, *labelled, l), r4, ray, tm, counter, &mut rec)
                     };
-                    if accel.inlines_leaves() {
-                        accel.closest_leaf_inlined(ray, t_max, test, counter);
-                    } else {
-                        #[allow(clippy::redundant_closure)]
-                        accel.closest_leaf_counted(ray, t_max, |l, tm| test(l, tm), counter);
-                    }
+                    accel.closest_leaf_inlined(ray, t_max, test, counter);
                 }
             }
             TriData::Single(tris) => {
@@ -579,19 +573,13 @@ impl TriData {
                     Tri4::any_in(&blocks[a as usize..b as usize], shared_ray4(r4, ray), t_max)
                 } else {
                     // As in `TriData::closest`.
-                    let mut test = {
+                    let test = {
                         #[inline(always)]
                         |l, tm| {
                             Tri4::any_in(TriData::leaf_blocks(blocks, ranges, *labelled, l), shared_ray4(r4, ray), tm)
                         }
                     };
-                    if accel.inlines_leaves() {
-                        accel.any_leaf_inlined(ray, t_max, test, &NoCount)
-                    } else {
-                        #[allow(clippy::redundant_closure)]
-                        let called = |l, tm| test(l, tm);
-                        accel.any_leaf_counted(ray, t_max, called, &NoCount)
-                    }
+                    accel.any_leaf_inlined(ray, t_max, test, &NoCount)
                 }
             }
             TriData::Single(tris) => accel.any(ray, t_max, |tri, tm| {

@@ -314,8 +314,8 @@ pub struct Bvh {
     /// Whether this CPU has AVX2: single rays then test a node's eight boxes in one register,
     /// and packets run in AVX2 lanes.
     avx: bool,
-    /// Whether it has AVX-512 as well ([`has_avx512`]): the walks of
-    /// [`Accel::closest_leaf_inlined`] and [`Accel::any_leaf_inlined`] then run.
+    /// Whether it has AVX-512 as well ([`has_avx512`]): [`Accel::closest_leaf_inlined`] and
+    /// [`Accel::any_leaf_inlined`] then run the walks compiled for it.
     avx512: bool,
 }
 
@@ -2535,19 +2535,21 @@ impl Accel for Bvh {
         self.any_on_cpu::<false>(ray, t_max, test, counter)
     }
 
-    fn inlines_leaves(&self) -> bool {
-        self.avx512
-    }
-
+    /// The AVX-512 walk with the test inlined where the CPU has it; elsewhere the AVX2 walk
+    /// keeps its call to the test (inlined there, the ray's constants went to memory).
     #[inline(always)]
     fn closest_leaf_inlined(
         &self,
         ray: &Ray,
         t_max: &mut f32,
-        test: impl FnMut(u32, f32) -> Option<f32>,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        self.closest_on_cpu::<true>(ray, t_max, test, counter)
+        if self.avx512 {
+            self.closest_on_cpu::<true>(ray, t_max, test, counter)
+        } else {
+            self.closest_on_cpu::<false>(ray, t_max, super::called(&mut test), counter)
+        }
     }
 
     #[inline(always)]
@@ -2555,10 +2557,14 @@ impl Accel for Bvh {
         &self,
         ray: &Ray,
         t_max: f32,
-        test: impl FnMut(u32, f32) -> bool,
+        mut test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        self.any_on_cpu::<true>(ray, t_max, test, counter)
+        if self.avx512 {
+            self.any_on_cpu::<true>(ray, t_max, test, counter)
+        } else {
+            self.any_on_cpu::<false>(ray, t_max, super::called(&mut test), counter)
+        }
     }
 
     fn boxes_at_depth(&self, depth: usize) -> Vec<Aabb> {

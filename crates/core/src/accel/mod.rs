@@ -29,6 +29,13 @@ use crate::geometry::{Aabb, Ray};
 use crate::scene::{Scene, World};
 
 /// The interface every acceleration structure implements.
+/// A closure of its own around `test`, which may be marked `#[inline(always)]`: a walk given
+/// it keeps the choice of inlining it (see [`Accel::closest_leaf_inlined`]).
+#[inline(always)]
+pub(crate) fn called<R>(test: &mut impl FnMut(u32, f32) -> R) -> impl FnMut(u32, f32) -> R + '_ {
+    move |leaf, t_max| test(leaf, t_max)
+}
+
 pub trait Accel: Send + Sync + Sized {
     /// Build settings: [`AccelParams`] or a superset of them.
     type Params: BuildParams;
@@ -116,36 +123,30 @@ pub trait Accel: Send + Sync + Sized {
         self.any_counted(ray, t_max, test, counter)
     }
 
-    /// Whether [`Accel::closest_leaf_inlined`] and [`Accel::any_leaf_inlined`] have a walk of
-    /// their own, with room for a leaf test inlined into it; callers then pass them a leaf
-    /// test marked `#[inline(always)]`, and call the `_counted` queries otherwise.
-    fn inlines_leaves(&self) -> bool {
-        false
-    }
-
-    /// [`Accel::closest_leaf_counted`] for a leaf test to be inlined into the walk, where
-    /// [`Accel::inlines_leaves`] says there is a walk for it (the BVH's, compiled with
-    /// AVX-512's 32 vector registers). The same leaves in the same order.
+    /// [`Accel::closest_leaf_counted`] for a leaf test marked `#[inline(always)]`: a structure
+    /// whose walk has the registers to take it inlined runs that walk (the BVH's copy compiled
+    /// with AVX-512's 32 vector registers); the others get a closure of their own around it and
+    /// call it as before. The same leaves in the same order.
     fn closest_leaf_inlined(
         &self,
         ray: &Ray,
         t_max: &mut f32,
-        test: impl FnMut(u32, f32) -> Option<f32>,
+        mut test: impl FnMut(u32, f32) -> Option<f32>,
         counter: &impl Counter,
     ) -> bool {
-        self.closest_leaf_counted(ray, t_max, test, counter)
+        self.closest_leaf_counted(ray, t_max, called(&mut test), counter)
     }
 
-    /// [`Accel::any_leaf_counted`] for a leaf test to be inlined into the walk (see
+    /// [`Accel::any_leaf_counted`] for a leaf test marked `#[inline(always)]` (see
     /// [`Accel::closest_leaf_inlined`]).
     fn any_leaf_inlined(
         &self,
         ray: &Ray,
         t_max: f32,
-        test: impl FnMut(u32, f32) -> bool,
+        mut test: impl FnMut(u32, f32) -> bool,
         counter: &impl Counter,
     ) -> bool {
-        self.any_leaf_counted(ray, t_max, test, counter)
+        self.any_leaf_counted(ray, t_max, called(&mut test), counter)
     }
 
     /// Closest hits of a packet of up to eight rays traced together (for coherent rays such
