@@ -1002,8 +1002,10 @@ impl<'s, A: Accel> World<'s, A> {
         // attribute): as a call, every object test made the walk store and reload its AVX
         // registers, and its triangle blocks ran in SSE encodings (the Cornell box 2.8 % fewer
         // instructions inlined, the same image). A mesh's own leaf test stays a call from its
-        // tree's walk (`TriData::closest`): inlined there, the walk's ray constants were read
-        // from memory at every node (the bench's loads +63 %), for no gain in time.
+        // tree's AVX2 walk (`TriData::closest`): inlined there, the walk's ray constants were
+        // read from memory at every node (the bench's loads +63 %), for no gain in time; the
+        // walk's AVX-512 copy, with registers enough, takes it inlined
+        // (`Accel::closest_leaf_inlined`).
         let mut test = {
             #[inline(always)]
             |obj: u32, tmax: f32| {

@@ -28,7 +28,6 @@ pub use kdtree::{KdParams, KdTree};
 use crate::geometry::{Aabb, Ray};
 use crate::scene::{Scene, World};
 
-/// The interface every acceleration structure implements.
 /// A closure of its own around `test`, which may be marked `#[inline(always)]`: a walk given
 /// it keeps the choice of inlining it (see [`Accel::closest_leaf_inlined`]).
 #[inline(always)]
@@ -36,6 +35,7 @@ pub(crate) fn called<R>(test: &mut impl FnMut(u32, f32) -> R) -> impl FnMut(u32,
     move |leaf, t_max| test(leaf, t_max)
 }
 
+/// The interface every acceleration structure implements.
 pub trait Accel: Send + Sync + Sized {
     /// Build settings: [`AccelParams`] or a superset of them.
     type Params: BuildParams;
