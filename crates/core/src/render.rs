@@ -506,12 +506,14 @@ mod tests {
         let world = AccelKind::DEFAULT.build_world(&scene, &AccelParams::default());
         crate::with_world!(&world, w => {
             let (image, _) = render(w, &integrator, settings, &|_| {});
-            let mut lit = 0;
+            // Samples that hit something, and pixels none of whose samples do (their packets
+            // take the path tracer's way for packets that all leave the scene).
+            let (mut lit, mut sky_pixels) = (0, 0);
             for y in 0..settings.height {
                 for x in 0..settings.width {
                     let pixel = y as u64 * settings.width as u64 + x as u64;
                     let key = (crate::sampling::mix64(settings.seed ^ pixel) >> 32) as u32;
-                    let (mut sum, mut n) = (Rgb::ZERO, 0.0f32);
+                    let (mut sum, mut n, lit_before) = (Rgb::ZERO, 0.0f32, lit);
                     for i in 0..settings.spp {
                         let (mut sampler, film, lens) = camera_film(w, settings, &Strata::new(settings.spp), x, y, pixel, key, i);
                         let ray = w.scene.camera.ray(film, settings.width, settings.height, lens);
@@ -524,9 +526,11 @@ mod tests {
                     // The renderer's arithmetic: Σ 1·L, added to an empty sum, over Σ 1.
                     let want = (Rgb::ZERO + sum) / n;
                     assert_eq!(image.pixels[pixel as usize], want, "{camera:?}, {spp} spp: pixel ({x}, {y})");
+                    sky_pixels += usize::from(lit == lit_before && want != Rgb::ZERO);
                 }
             }
             assert!(lit > 20 * spp as usize, "{camera:?}: {lit} camera samples hit the sphere");
+            assert!(sky_pixels > 0, "{camera:?}: no pixel sees only the (lit) sky");
         });
     }
 

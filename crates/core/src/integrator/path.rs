@@ -467,6 +467,19 @@ impl Integrator for Path {
     ) -> [Rgb; 8] {
         let n = samplers.len().min(8);
         let samplers = &mut samplers[..n];
+        // Every camera ray left the scene (the sky around a single object, most of a packet's
+        // samples there): each lane's one vertex is `begin`'s, as in the loop below, without
+        // the lockstep's arrays.
+        if next[..n].iter().all(Option::is_none) {
+            let mut out = [Rgb::ZERO; 8];
+            for (o, ray) in out.iter_mut().zip(rays).take(n) {
+                let mut st = PathState::new(ray);
+                let none = self.begin(world, &mut st, None);
+                debug_assert!(none.is_none());
+                *o = st.l.into();
+            }
+            return out;
+        }
         let mut st: [PathState; 8] = std::array::from_fn(|i| PathState::new(&rays[i]));
         let mut queries = [(rays[0], Skip::NONE); 8];
         let mut live = (1u32 << samplers.len()) - 1;
