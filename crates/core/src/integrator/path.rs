@@ -468,15 +468,12 @@ impl Integrator for Path {
         let n = samplers.len().min(8);
         let samplers = &mut samplers[..n];
         // Every camera ray left the scene (the sky around a single object, most of a packet's
-        // samples there): each lane's one vertex is `begin`'s, as in the loop below, without
-        // the lockstep's arrays.
+        // samples there): each path is its one vertex, `begin`'s, which draws no number; path
+        // by path, without the lockstep's arrays.
         if next[..n].iter().all(Option::is_none) {
             let mut out = [Rgb::ZERO; 8];
-            for (o, ray) in out.iter_mut().zip(rays).take(n) {
-                let mut st = PathState::new(ray);
-                let none = self.begin(world, &mut st, None);
-                debug_assert!(none.is_none());
-                *o = st.l.into();
+            for (i, rng) in samplers.iter_mut().enumerate() {
+                out[i] = self.radiance(world, &rays[i], None, rng, stats);
             }
             return out;
         }
