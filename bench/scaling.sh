@@ -9,6 +9,8 @@
 #   9-10 ms on the bunny);
 # - rendering: `snell render SCENE --threads 1` then `--threads 2`, ROUNDS (default 3) times, on
 #   the Cornell box and the bunny and dragon under a constant environment, 256x256, 64 spp.
+# First, what the machine itself gives two threads in this hour (bench/machine_scaling.c: loops of
+# arithmetic and of dependent loads, nothing of Snell's), where a C compiler is installed.
 #
 #   bench/scaling.sh [SNELL_BINARY]
 #
@@ -27,6 +29,11 @@ make_mesh ico8
 
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
+
+if command -v cc >/dev/null && cc -O2 -pthread -o "$tmp/machine_scaling" bench/machine_scaling.c; then
+    echo "== the machine: the same loop on one thread, then on two at once, alternated ($REPS rounds)"
+    "$tmp/machine_scaling" "$REPS"
+fi
 
 for mesh in "$SCENES/stanford/bunny.ply" "$WORK/ico.ply" "$WORK/ico8.ply" "$SCENES/stanford/dragon_vrip.ply" "$SCENES/misc/spot.obj"; do
     [ -f "$mesh" ] || { echo "missing $mesh" >&2; exit 1; }
