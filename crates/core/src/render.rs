@@ -351,7 +351,10 @@ fn render_pixel<A: Accel, I: Integrator>(
             let m = (n - 8 * g).min(8);
             let (film, rays) = (&film[g], &rays[g]);
             for (i, first) in firsts.iter_mut().enumerate() {
-                *first = hits[g][i].as_ref().filter(|_| i < m).map(|h| world.interaction(&rays[i], h));
+                match hits[g][i].as_ref().filter(|_| i < m) {
+                    Some(h) => world.interaction_into(&rays[i], h, first),
+                    None => *first = None,
+                }
             }
             stats.camera += m as u64;
             // The AOVs of the camera hits, where asked for (built before the integrator takes

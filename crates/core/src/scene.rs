@@ -971,6 +971,16 @@ impl<'s, A: Accel> World<'s, A> {
         self.hit_skipping(ray, t_max, skip, &NoCount).map(|h| self.interaction(ray, &h))
     }
 
+    /// [`World::intersect_skipping`] written into `out`, where the caller keeps it (see
+    /// [`World::interaction_into`]).
+    #[inline(always)]
+    pub fn intersect_skipping_into(&self, ray: &Ray, t_max: f32, skip: Skip, out: &mut Option<Intersection>) {
+        match self.hit_skipping(ray, t_max, skip, &NoCount) {
+            Some(h) => self.interaction_into(ray, &h, out),
+            None => *out = None,
+        }
+    }
+
     /// Closest hit with `0 < t < t_max`: only which primitive and where on it.
     #[inline]
     pub fn hit(&self, ray: &Ray, t_max: f32) -> Option<RawHit> {
@@ -1322,11 +1332,43 @@ impl<'s, A: Accel> World<'s, A> {
     /// Everything shading needs about the hit `h` of `ray` (as [`World::hit`] or a packet query
     /// finds it).
     pub fn interaction(&self, ray: &Ray, h: &RawHit) -> Intersection {
-        let RawHit { t, object: obj, prim, b1, b2 } = *h;
-        if let Some(m) = &self.object_meshes[obj as usize] {
-            let (p, ng, ns, uv) = m.surface(self.face_normals[m.geometry][prim as usize], prim, b1, b2);
-            return Intersection::new(ray, t, p, ng, ns, uv, obj);
+        match &self.object_meshes[h.object as usize] {
+            Some(m) => self.mesh_interaction(m, ray, h),
+            None => self.interaction_other(ray, h),
         }
+    }
+
+    /// [`World::interaction`] written into `out`, where the caller keeps it. An untransformed
+    /// mesh's hit (most hits) is worked out inline and written there field by field. (Returned
+    /// from a call, or from the two ways joined, it was built in a temporary and copied over
+    /// in 16-byte pieces, whose loads waited for the temporary's narrower stores: a
+    /// store-forwarding stall on every hit.)
+    #[inline(always)]
+    pub fn interaction_into(&self, ray: &Ray, h: &RawHit, out: &mut Option<Intersection>) {
+        match &self.object_meshes[h.object as usize] {
+            Some(m) => *out = Some(self.mesh_interaction(m, ray, h)),
+            None => self.interaction_other_into(ray, h, out),
+        }
+    }
+
+    /// [`World::interaction`] of a hit on an untransformed mesh `m`.
+    #[inline(always)]
+    fn mesh_interaction(&self, m: &MeshRef, ray: &Ray, h: &RawHit) -> Intersection {
+        let RawHit { t, object, prim, b1, b2 } = *h;
+        let (p, ng, ns, uv) = m.surface(self.face_normals[m.geometry][prim as usize], prim, b1, b2);
+        Intersection::new(ray, t, p, ng, ns, uv, object)
+    }
+
+    /// [`World::interaction_into`] of a hit on a sphere or a transformed mesh.
+    #[inline(never)]
+    fn interaction_other_into(&self, ray: &Ray, h: &RawHit, out: &mut Option<Intersection>) {
+        *out = Some(self.interaction_other(ray, h));
+    }
+
+    /// [`World::interaction`] of a hit on a sphere or a transformed mesh.
+    #[inline]
+    fn interaction_other(&self, ray: &Ray, h: &RawHit) -> Intersection {
+        let RawHit { t, object: obj, prim, b1, b2 } = *h;
         let o = &self.scene.objects[obj as usize];
         let (p, mut ng, mut ns, uv) = match &self.scene.geometries[o.geometry] {
             Geometry::Sphere(s) => {

@@ -567,7 +567,7 @@ impl Integrator for Path {
             }
             for lane in crate::accel::lanes(live) {
                 let (ray, skip) = &queries[lane];
-                next[lane] = world.intersect_skipping(ray, f32::INFINITY, *skip);
+                world.intersect_skipping_into(ray, f32::INFINITY, *skip, &mut next[lane]);
             }
         }
         st.map(|s| s.l.into())
