@@ -115,10 +115,19 @@ impl Tri4 {
         let l = &r.lanes;
         let mut rec = None;
         for block in blocks {
+            // The lanes' hit stays in registers: had the two ways joined into one `found`, the
+            // lanes' would have been stored field by field, where the scalar call returns it, and
+            // read back in wider pieces (a store-forwarding stall on every block that hit).
             #[cfg(target_arch = "x86_64")]
             let found = match block.lanes(l, t_max) {
                 Some((mask, t, inv, v, w)) => block.nearest(mask, t, inv, v, w),
-                None => block.closest_scalar(r, t_max),
+                None => {
+                    if let Some((tri, h)) = block.closest_scalar(r, t_max) {
+                        t_max = h.t;
+                        rec = Some((tri, h));
+                    }
+                    continue;
+                }
             };
             #[cfg(not(target_arch = "x86_64"))]
             let found = block.closest_scalar(r, t_max);
