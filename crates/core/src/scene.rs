@@ -609,7 +609,7 @@ fn with_mesh_ray<R>(
 /// The boxes of `m`'s triangles, and their union, in one parallel pass (a second pass to
 /// unite them cost 3 ms of the dragon's build).
 /// Each triangle's box, their union, and each triangle's unit normal by its winding (zero for
-/// a degenerate triangle: [`World::interaction`] then falls back to the ray), in one parallel
+/// a degenerate triangle: [`World::interaction_into`] then falls back to the ray), in one parallel
 /// pass over the triangles.
 fn triangle_boxes(m: &Mesh) -> (Vec<Aabb>, Aabb, Vec<Vec3>) {
     use rayon::prelude::*;
@@ -650,11 +650,11 @@ pub struct World<'s, A: Accel> {
     /// Per geometry, the triangles laid out for its bottom-level structure.
     tris: Vec<TriData>,
     /// Per mesh, each triangle's unit geometric normal (its winding's; empty for spheres), as
-    /// [`World::interaction`] would compute it: worked out once, not at every hit, where its
+    /// [`World::interaction_into`] would compute it: worked out once, not at every hit, where its
     /// square root and division sat on the path of every shading point.
     face_normals: Vec<Vec<Vec3>>,
     /// Per object, an untransformed mesh's arrays straight from the scene (`None` for spheres
-    /// and transformed meshes): [`World::interaction`] reaches a hit's vertices from here in
+    /// and transformed meshes): [`World::interaction_into`] reaches a hit's vertices from here in
     /// one load instead of through the object, the geometry and the mesh in turn.
     object_meshes: Vec<Option<MeshRef<'s>>>,
     /// Per object, `(geometry, first block, end)` where the object is an untransformed mesh
@@ -968,7 +968,9 @@ impl<'s, A: Accel> World<'s, A> {
 
     /// [`World::intersect`] passing over the objects of `skip`, which the ray cannot meet.
     pub fn intersect_skipping(&self, ray: &Ray, t_max: f32, skip: Skip) -> Option<Intersection> {
-        self.hit_skipping(ray, t_max, skip, &NoCount).map(|h| self.interaction(ray, &h))
+        let mut out = None;
+        self.intersect_skipping_into(ray, t_max, skip, &mut out);
+        out
     }
 
     /// [`World::intersect_skipping`] written into `out`, where the caller keeps it (see
@@ -1330,44 +1332,24 @@ impl<'s, A: Accel> World<'s, A> {
     }
 
     /// Everything shading needs about the hit `h` of `ray` (as [`World::hit`] or a packet query
-    /// finds it).
-    pub fn interaction(&self, ray: &Ray, h: &RawHit) -> Intersection {
-        match &self.object_meshes[h.object as usize] {
-            Some(m) => self.mesh_interaction(m, ray, h),
-            None => self.interaction_other(ray, h),
-        }
-    }
-
-    /// [`World::interaction`] written into `out`, where the caller keeps it. An untransformed
-    /// mesh's hit (most hits) is worked out inline and written there field by field. (Returned
-    /// from a call, or from the two ways joined, it was built in a temporary and copied over
-    /// in 16-byte pieces, whose loads waited for the temporary's narrower stores: a
+    /// finds it), written into `out`, where the caller keeps it. An untransformed mesh's hit
+    /// (most hits) is worked out inline and written there field by field. (Returned from a
+    /// call, or from the two ways joined, it was built in a temporary and copied over in
+    /// 16-byte pieces, whose loads waited for the temporary's narrower stores: a
     /// store-forwarding stall on every hit.)
     #[inline(always)]
     pub fn interaction_into(&self, ray: &Ray, h: &RawHit, out: &mut Option<Intersection>) {
-        match &self.object_meshes[h.object as usize] {
-            Some(m) => *out = Some(self.mesh_interaction(m, ray, h)),
-            None => self.interaction_other_into(ray, h, out),
-        }
-    }
-
-    /// [`World::interaction`] of a hit on an untransformed mesh `m`.
-    #[inline(always)]
-    fn mesh_interaction(&self, m: &MeshRef, ray: &Ray, h: &RawHit) -> Intersection {
+        let Some(m) = &self.object_meshes[h.object as usize] else {
+            return self.interaction_other_into(ray, h, out);
+        };
         let RawHit { t, object, prim, b1, b2 } = *h;
         let (p, ng, ns, uv) = m.surface(self.face_normals[m.geometry][prim as usize], prim, b1, b2);
-        Intersection::new(ray, t, p, ng, ns, uv, object)
+        *out = Some(Intersection::new(ray, t, p, ng, ns, uv, object));
     }
 
     /// [`World::interaction_into`] of a hit on a sphere or a transformed mesh.
     #[inline(never)]
     fn interaction_other_into(&self, ray: &Ray, h: &RawHit, out: &mut Option<Intersection>) {
-        *out = Some(self.interaction_other(ray, h));
-    }
-
-    /// [`World::interaction`] of a hit on a sphere or a transformed mesh.
-    #[inline]
-    fn interaction_other(&self, ray: &Ray, h: &RawHit) -> Intersection {
         let RawHit { t, object: obj, prim, b1, b2 } = *h;
         let o = &self.scene.objects[obj as usize];
         let (p, mut ng, mut ns, uv) = match &self.scene.geometries[o.geometry] {
@@ -1397,11 +1379,11 @@ impl<'s, A: Accel> World<'s, A> {
             }
             None => p,
         };
-        Intersection::new(ray, t, p, ng, ns, uv, obj)
+        *out = Some(Intersection::new(ray, t, p, ng, ns, uv, obj));
     }
 }
 
-/// A mesh's arrays as [`World::interaction`] reads them, and the index of its geometry.
+/// A mesh's arrays as [`World::interaction_into`] reads them, and the index of its geometry.
 #[derive(Clone, Copy)]
 struct MeshRef<'s> {
     indices: &'s [[u32; 3]],
