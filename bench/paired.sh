@@ -1,0 +1,77 @@
+#!/usr/bin/env bash
+# Two Snell binaries compared on one workload by running them at the same time, one thread
+# each, each pinned to its own CPU (`taskset`), the CPUs swapped every round: both see the same
+# minute of the machine, whose speed drifts by tens of per cent from one minute to the next, so
+# that a change of a few per cent shows in the per-round ratios where separate runs bury it.
+#
+#   bench/paired.sh A B ROUNDS bench MESH [ARGS...]     tracing (`snell bench`): per workload
+#   bench/paired.sh A B ROUNDS render SCENE [ARGS...]   rendering (`snell render`): render time
+#
+# Each round runs `A ARGS --threads 1` and `B ARGS --threads 1` together (a render writes to a
+# temporary file; a scene with a `scenes` default is given -D scenes=SCENES). Prints, per
+# workload, both medians, the geometric mean and median of the per-round ratios B/A (above 1: B
+# is faster, for rays per second as for render times) and the rounds B won. Run against itself,
+# a binary gives ratios about 1 and wins about half the rounds: that is the method's noise.
+# Needs two CPUs.
+[ $# -ge 5 ] || { sed -n '2,14p' "$0" >&2; exit 2; }
+rounds=$3 mode=$4 input=$(readlink -f "$5")
+# (common.sh moves to the repository's root: the mesh or scene is found from here first.)
+source "$(dirname "$0")/common.sh" "$1" "$2"
+a=${bins[0]} b=${bins[1]}
+shift 5
+set -- "$input" "$@"
+[ "$(nproc)" -ge 2 ] || { echo "paired.sh needs two CPUs" >&2; exit 1; }
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+args=("$@")
+case $mode in
+    bench) args+=(--json) ;;
+    render)
+        grep -q '<default name="scenes"' "$1" 2>/dev/null && args+=(-D "scenes=$SCENES")
+        ;;
+    *) echo "mode must be bench or render, not $mode" >&2; exit 2 ;;
+esac
+
+# run BIN CPU OUT: one run on CPU, its figures as "workload value" lines in OUT.
+run() {
+    local extra=()
+    [ "$mode" = render ] && extra=(-o "$tmp/$2.exr")
+    taskset -c "$2" "$1" "$mode" "${args[@]}" "${extra[@]}" --threads 1 > "$tmp/raw$2" 2>&1 || {
+        cat "$tmp/raw$2" >&2
+        return 1
+    }
+    if [ "$mode" = bench ]; then
+        python3 -c 'import json, sys
+for line in sys.stdin:
+    d = json.loads(line)
+    print(d["workload"], d["mrays_per_s"])' < "$tmp/raw$2" > "$3"
+    else
+        sed -n 's/.*render \([0-9.]*\) s.*/render-seconds \1/p' "$tmp/raw$2" > "$3"
+    fi
+}
+
+for r in $(seq "$rounds"); do
+    ca=$((r % 2)) cb=$((1 - r % 2))
+    run "$a" $ca "$tmp/a" & pa=$!
+    run "$b" $cb "$tmp/b" & pb=$!
+    ok=1
+    wait $pa || ok=0
+    wait $pb || ok=0
+    [ $ok = 1 ] || exit 1
+    paste "$tmp/a" "$tmp/b" | awk '{print $1, $2, $4}' >> "$tmp/rounds"
+done
+
+python3 - "$tmp/rounds" "$mode" <<'PY'
+import collections, math, statistics, sys
+rows = collections.defaultdict(list)
+for line in open(sys.argv[1]):
+    w, x, y = line.split()
+    rows[w].append((float(x), float(y)))
+for w, v in rows.items():
+    # Above 1: B faster (rays per second up, or seconds down).
+    q = [y / x if sys.argv[2] == "bench" else x / y for x, y in v]
+    g = math.exp(sum(map(math.log, q)) / len(q))
+    print(f"{w:16s} A {statistics.median(x for x, _ in v):8.3f}  B {statistics.median(y for _, y in v):8.3f}  "
+          f"B/A speed: geomean {g:.3f}, median {statistics.median(q):.3f} ({min(q):.3f}-{max(q):.3f}), "
+          f"B faster in {sum(x > 1 for x in q)}/{len(q)}")
+PY
