@@ -9,11 +9,13 @@
 #
 # Each round runs `A ARGS --threads 1` and `B ARGS --threads 1` together (a render writes to a
 # temporary file; a scene with a `scenes` default is given -D scenes=SCENES). Prints, per
-# workload, both medians, the geometric mean and median of the per-round ratios B/A (above 1: B
-# is faster, for rays per second as for render times) and the rounds B won. Run against itself,
-# a binary gives ratios about 1 and wins about half the rounds: that is the method's noise.
-# Needs two CPUs.
-[ $# -ge 5 ] || { sed -n '2,14p' "$0" >&2; exit 2; }
+# workload, both medians, the geometric mean of the per-round speed ratios B/A (above 1: B is
+# faster, for rays per second as for render times), and over pairs of rounds (the CPUs swapped
+# between the two, which cancels a difference between the CPUs) the median ratio, its range
+# and the pairs B won. ROUNDS is even. Run against itself, a binary gives ratios about 1 and
+# wins about half the pairs: that is the method's noise. Needs two CPUs.
+[ $# -ge 5 ] || { sed -n '2,16p' "$0" >&2; exit 2; }
+[ $(($3 % 2)) = 0 ] && [ "$3" -gt 0 ] || { echo "ROUNDS must be even and positive (the CPUs swap every round)" >&2; exit 2; }
 rounds=$3 mode=$4 input=$(readlink -f "$5")
 # (common.sh moves to the repository's root: the mesh or scene is found from here first.)
 source "$(dirname "$0")/common.sh" "$1" "$2"
@@ -71,7 +73,11 @@ for w, v in rows.items():
     # Above 1: B faster (rays per second up, or seconds down).
     q = [y / x if sys.argv[2] == "bench" else x / y for x, y in v]
     g = math.exp(sum(map(math.log, q)) / len(q))
+    # Each two rounds swap the CPUs: their ratios' geometric mean cancels a difference in
+    # speed between the two CPUs (on the fifty-second session's machine one ran the same
+    # render 15-45 % slower than the other, for minutes at a time).
+    p = [math.sqrt(q[i] * q[i + 1]) for i in range(0, len(q) - 1, 2)]
     print(f"{w:16s} A {statistics.median(x for x, _ in v):8.3f}  B {statistics.median(y for _, y in v):8.3f}  "
-          f"B/A speed: geomean {g:.3f}, median {statistics.median(q):.3f} ({min(q):.3f}-{max(q):.3f}), "
-          f"B faster in {sum(x > 1 for x in q)}/{len(q)}")
+          f"B/A speed: geomean {g:.3f}; pairs of rounds: median {statistics.median(p):.3f} "
+          f"({min(p):.3f}-{max(p):.3f}), B faster in {sum(x > 1 for x in p)}/{len(p)}")
 PY
