@@ -1151,6 +1151,7 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, finite: bool, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+    debug_assert_eq!(finite, r.finite);
     if finite {
         slab_avx_with::<true, FUSED>(n, r, t_max, out)
     } else {
@@ -1231,7 +1232,8 @@ fn imin8(a: std::arch::x86_64::__m256, b: std::arch::x86_64::__m256) -> std::arc
 }
 
 /// The slab test of node `n`'s children: [`slab_avx`] where `AVX`, [`slab`] otherwise; the
-/// entry distances go to `t`, the hit mask is returned.
+/// entry distances go to `t`, the hit mask is returned. `finite` is `r.finite`, as the walk
+/// read it (see [`slab_avx`]).
 #[inline(always)]
 fn node_slab<const AVX: bool, const FUSED: bool>(
     n: &Wide,
@@ -1254,6 +1256,7 @@ fn node_slab<const AVX: bool, const FUSED: bool>(
 /// deepest, except the nearest, which is returned (`None`: no child is hit). The one- and
 /// two-child cases, by far the most common, take no loop. With `ANY` (the any-hit walk) the
 /// children are not ordered: the first hit is returned, the others pushed in slot order.
+/// `finite` as in [`node_slab`].
 #[inline(always)]
 fn visit<const AVX: bool, const FUSED: bool, const ANY: bool>(
     nodes: &[Wide],
