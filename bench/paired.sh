@@ -7,6 +7,10 @@
 #   bench/paired.sh A B ROUNDS bench MESH [ARGS...]     tracing (`snell bench`): per workload
 #   bench/paired.sh A B ROUNDS render SCENE [ARGS...]   rendering (`snell render`): render time
 #
+# In bench mode A may be Embree's benchmark (`embree_bench`, which vs_embree.sh builds into
+# WORK): it runs on the mesh's `.bin` beside the `.ply` (quality high, AVX2, one thread, the
+# `--reps` given to Snell), its single rays and 16-ray packets taken for Snell's workloads.
+#
 # Each round runs `A ARGS --threads 1` and `B ARGS --threads 1` together (a render writes to a
 # temporary file; a scene with a `scenes` default is given -D scenes=SCENES). Prints, per
 # workload, both medians, the geometric mean of the per-round speed ratios B/A (above 1: B is
@@ -14,7 +18,7 @@
 # between the two, which cancels a difference between the CPUs) the median ratio, its range
 # and the pairs B won. ROUNDS is even. Run against itself, a binary gives ratios about 1 and
 # wins about half the pairs: that is the method's noise. Needs two CPUs.
-[ $# -ge 5 ] || { sed -n '2,16p' "$0" >&2; exit 2; }
+[ $# -ge 5 ] || { sed -n '2,20p' "$0" >&2; exit 2; }
 [ $(($3 % 2)) = 0 ] && [ "$3" -gt 0 ] || { echo "ROUNDS must be even and positive (the CPUs swap every round)" >&2; exit 2; }
 rounds=$3 mode=$4 input=$(readlink -f "$5")
 # (common.sh moves to the repository's root: the mesh or scene is found from here first.)
@@ -34,8 +38,30 @@ case $mode in
     *) echo "mode must be bench or render, not $mode" >&2; exit 2 ;;
 esac
 
+# The repetitions Snell's bench is given, for Embree's.
+reps=5
+for ((i = 0; i < ${#args[@]} - 1; i++)); do [ "${args[i]}" = --reps ] && reps=${args[i + 1]}; done
+
 # run BIN CPU OUT: one run on CPU, its figures as "workload value" lines in OUT.
 run() {
+    if [ "$(basename "$1")" = embree_bench ]; then
+        [ "$mode" = bench ] || { echo "Embree's benchmark traces rays; it does not render" >&2; return 2; }
+        taskset -c "$2" "$1" "${input%.*}.bin" --quality high --isa avx2 --threads 1 --reps "$reps" \
+            > "$tmp/raw$2" 2>&1 || {
+            cat "$tmp/raw$2" >&2
+            return 1
+        }
+        python3 -c 'import sys
+names = {("intersect1", "primary"): "primary", ("intersect16", "primary"): "primary-packets",
+         ("intersect1", "diffuse_bounce"): "bounce", ("occluded1", "diffuse_bounce"): "bounce-occluded"}
+for line in sys.stdin:
+    if line.startswith("RESULT"):
+        f = dict(x.split("=", 1) for x in line.split()[1:])
+        w = names.get((f["api"], f["kind"]))
+        if w:
+            print(w, f["mrays_med"])' < "$tmp/raw$2" > "$3"
+        return 0
+    fi
     local extra=()
     [ "$mode" = render ] && extra=(-o "$tmp/$2.exr")
     taskset -c "$2" "$1" "$mode" "${args[@]}" "${extra[@]}" --threads 1 > "$tmp/raw$2" 2>&1 || {
@@ -60,7 +86,8 @@ for r in $(seq "$rounds"); do
     wait $pa || ok=0
     wait $pb || ok=0
     [ $ok = 1 ] || exit 1
-    paste "$tmp/a" "$tmp/b" | awk '{print $1, $2, $4}' >> "$tmp/rounds"
+    # Joined by workload (Embree's come in another order than Snell's).
+    join <(sort "$tmp/a") <(sort "$tmp/b") >> "$tmp/rounds"
 done
 
 python3 - "$tmp/rounds" "$mode" <<'PY'
