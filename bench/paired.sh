@@ -11,16 +11,17 @@
 # WORK): it runs on the mesh's `.bin` beside the `.ply` (quality high, AVX2, one thread, the
 # `--reps` given to Snell), its single rays and 16-ray packets taken for Snell's workloads.
 #
-# Each round runs `A ARGS --threads 1` and `B ARGS --threads 1` together (a render writes to a
-# temporary file; a scene with a `scenes` default is given -D scenes=SCENES). Prints, per
-# workload, both medians, the geometric mean of the per-round speed ratios B/A (above 1: B is
-# faster, for rays per second as for render times), and over pairs of rounds (the CPUs swapped
-# between the two, which cancels a difference between the CPUs) the median ratio, its range
-# and the pairs B won. ROUNDS is even. Run against itself, a binary gives ratios about 1 and
-# wins about half the pairs: that is the method's noise. Needs two CPUs.
+# Each round runs `A ARGS --threads 1` and `B ARGS --threads 1` together (a render as
+# common.sh's `render_time` runs it: to a temporary file, -D scenes=SCENES where the scene has
+# that default). Prints, per workload, both medians, the geometric mean of the per-round speed
+# ratios B/A (above 1: B is faster, for rays per second as for render times), and over pairs of
+# rounds (the CPUs swapped between the two, which cancels a difference between the CPUs) the
+# median ratio, its range and the pairs B won. ROUNDS is even. Run against itself, a binary
+# gives ratios about 1 and wins about half the pairs: that is the method's noise. Needs two CPUs.
 [ $# -ge 5 ] || { sed -n '2,20p' "$0" >&2; exit 2; }
 [ $(($3 % 2)) = 0 ] && [ "$3" -gt 0 ] || { echo "ROUNDS must be even and positive (the CPUs swap every round)" >&2; exit 2; }
 rounds=$3 mode=$4 input=$(readlink -f "$5")
+[ -f "$input" ] || { echo "no such file: $5" >&2; exit 1; }
 # (common.sh moves to the repository's root: the mesh or scene is found from here first.)
 source "$(dirname "$0")/common.sh" "$1" "$2"
 a=${bins[0]} b=${bins[1]}
@@ -31,10 +32,7 @@ tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 args=("$@")
 case $mode in
-    bench) args+=(--json) ;;
-    render)
-        grep -q '<default name="scenes"' "$1" 2>/dev/null && args+=(-D "scenes=$SCENES")
-        ;;
+    bench | render) ;;
     *) echo "mode must be bench or render, not $mode" >&2; exit 2 ;;
 esac
 
@@ -42,12 +40,19 @@ esac
 reps=5
 for ((i = 0; i < ${#args[@]} - 1; i++)); do [ "${args[i]}" = --reps ] && reps=${args[i + 1]}; done
 
-# run BIN CPU OUT: one run on CPU, its figures as "workload value" lines in OUT.
+# run BIN CPU OUT: one run on CPU, its figures as "workload value" lines in OUT. Called in a
+# background subshell, which pins itself (and so what it starts) to CPU.
 run() {
+    taskset -pc "$2" "$BASHPID" > /dev/null
+    if [ "$mode" = render ]; then
+        [ "$(basename "$1")" != embree_bench ] || { echo "Embree's benchmark traces rays; it does not render" >&2; return 2; }
+        local t
+        t=$(render_time "$1" "${args[@]}" --threads 1) || return 1
+        echo "render-seconds $t" > "$3"
+        return
+    fi
     if [ "$(basename "$1")" = embree_bench ]; then
-        [ "$mode" = bench ] || { echo "Embree's benchmark traces rays; it does not render" >&2; return 2; }
-        taskset -c "$2" "$1" "${input%.*}.bin" --quality high --isa avx2 --threads 1 --reps "$reps" \
-            > "$tmp/raw$2" 2>&1 || {
+        "$1" "${input%.*}.bin" --quality high --isa avx2 --threads 1 --reps "$reps" > "$tmp/raw$2" 2>&1 || {
             cat "$tmp/raw$2" >&2
             return 1
         }
@@ -60,22 +65,16 @@ for line in sys.stdin:
         w = names.get((f["api"], f["kind"]))
         if w:
             print(w, f["mrays_med"])' < "$tmp/raw$2" > "$3"
-        return 0
+        return
     fi
-    local extra=()
-    [ "$mode" = render ] && extra=(-o "$tmp/$2.exr")
-    taskset -c "$2" "$1" "$mode" "${args[@]}" "${extra[@]}" --threads 1 > "$tmp/raw$2" 2>&1 || {
+    "$1" bench "${args[@]}" --json --threads 1 > "$tmp/raw$2" 2>&1 || {
         cat "$tmp/raw$2" >&2
         return 1
     }
-    if [ "$mode" = bench ]; then
-        python3 -c 'import json, sys
+    python3 -c 'import json, sys
 for line in sys.stdin:
     d = json.loads(line)
     print(d["workload"], d["mrays_per_s"])' < "$tmp/raw$2" > "$3"
-    else
-        sed -n 's/.*render \([0-9.]*\) s.*/render-seconds \1/p' "$tmp/raw$2" > "$3"
-    fi
 }
 
 for r in $(seq "$rounds"); do
