@@ -56,15 +56,7 @@ run() {
             cat "$tmp/raw$2" >&2
             return 1
         }
-        python3 -c 'import sys
-names = {("intersect1", "primary"): "primary", ("intersect16", "primary"): "primary-packets",
-         ("intersect1", "diffuse_bounce"): "bounce", ("occluded1", "diffuse_bounce"): "bounce-occluded"}
-for line in sys.stdin:
-    if line.startswith("RESULT"):
-        f = dict(x.split("=", 1) for x in line.split()[1:])
-        w = names.get((f["api"], f["kind"]))
-        if w:
-            print(w, f["mrays_med"])' < "$tmp/raw$2" > "$3"
+        python3 bench/embree_results.py < "$tmp/raw$2" > "$3"
         return
     fi
     "$1" bench "${args[@]}" --json --threads 1 > "$tmp/raw$2" 2>&1 || {

@@ -59,24 +59,16 @@ for mesh in $MESHES; do
     done
     python3 - "$mesh" "$out" "$ROUNDS" "$@" <<'PY'
 import json, statistics, sys
+sys.path.insert(0, "bench")
+from embree_results import WORKLOADS, results
 mesh, out, rounds, bins = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4:]
 
-def embree(path):
-    d = {}
-    for line in open(path):
-        kv = dict(x.split("=", 1) for x in line.split()[1:])
-        d[(kv["quality"], kv["api"], kv["kind"])] = kv
-    return d
-
-runs = [embree(f"{out}.e{r}") for r in range(rounds + 1)]
+runs = [results(open(f"{out}.e{r}")) for r in range(rounds + 1)]
 med = statistics.median
 embree_of = lambda key, field: [float(e[key][field]) for e in runs]
 spread = lambda xs: f"{min(xs):.2f}" if len(xs) == 1 else f"{min(xs):.2f}-{max(xs):.2f}"
 print(f"== {mesh}: Embree high/medium, {rounds + 1} runs around {rounds} round(s) of Snell (medians)")
-rows = [("primary", ("high", "intersect1", "primary")),
-        ("bounce", ("high", "intersect1", "diffuse_bounce")),
-        ("bounce-occluded", ("high", "occluded1", "diffuse_bounce")),
-        ("primary-packets", ("high", "intersect16", "primary"))]
+rows = [(name, ("high", *key)) for name, key in WORKLOADS.items()]
 for k, b in enumerate(bins):
     s = [{j["workload"]: j for j in map(json.loads, open(f"{out}.s{k}.{r}"))} for r in range(1, rounds + 1)]
     build = med(embree_of(("medium", "build", "bvh"), "med_ms"))
