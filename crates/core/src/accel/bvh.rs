@@ -1366,6 +1366,9 @@ unsafe fn visit_avx512<const FUSED: bool>(
     // SAFETY (of the intrinsics below): the caller's CPU has AVX2, FMA and AVX-512 F/VL; the
     // loads read `n`'s references, eight `u32`s.
     unsafe {
+        // Not redundant with the load below: the compiler places that load after the branch on
+        // an empty mask, and the prefetch asks for the references' line as the bounds are
+        // asked for, as `visit` does.
         _mm_prefetch(n.child.as_ptr().cast::<i8>(), _MM_HINT_T0);
         let kids = _mm256_loadu_si256(n.child.as_ptr().cast());
         let (tn, tf) = slab_avx_dists::<true, FUSED>(n, r, t_max);
