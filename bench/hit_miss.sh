@@ -2,9 +2,10 @@
 # Where a mesh's bounce rays lose or gain against Embree: on the rays that miss the mesh, or on
 # those that hit it. `hit_miss.sh MESH [SNELL] [ROUNDS]` splits WORK/MESH_bounce.f32 (made by
 # vs_embree.sh) into the rays that hit the mesh and those that miss it, as Mitsuba's
-# `ray_test` finds them (`pip install mitsuba numpy`), and runs paired.sh's bounce and
-# any-hit workloads on each set: Snell's `bench --rays` against Embree's benchmark built to
-# trace its bounce rays from a file (EB_BOUNCE_FILE; embree_patch.sh, in WORK/replay). Only
+# `ray_test` finds them (`pip install mitsuba numpy`; its LLVM variant, as for vs_mitsuba.sh),
+# and runs paired.sh's bounce and any-hit workloads on each set: Snell's `bench --rays`
+# against Embree's benchmark built to trace its bounce rays from a file (EB_BOUNCE_FILE;
+# embree_patch.sh, in WORK/replay). Only
 # the `bounce` and `bounce-occluded` rows are printed: the primary rays are the sets' first
 # thousand, a stand-in that `snell bench --rays` needs. SNELL defaults to target/release/snell,
 # ROUNDS to 6. WORK as in vs_embree.sh (default /tmp/snell-embree).
@@ -38,7 +39,7 @@ python3 - "$WORK/$mesh" "$split/$mesh" <<'PY'
 import sys
 import mitsuba as mi
 import numpy as np
-mi.set_variant("scalar_rgb" if "llvm_ad_rgb" not in mi.variants() else "llvm_ad_rgb")
+mi.set_variant("llvm_ad_rgb")  # vectorised: every ray of the file in one query
 src, out = sys.argv[1], sys.argv[2]
 scene = mi.load_dict({"type": "scene", "mesh": {"type": "ply", "filename": src + ".ply"}})
 r = np.fromfile(src + "_bounce.f32", dtype=np.float32).reshape(-1, 6)
