@@ -70,7 +70,10 @@ def main():
     closest, n_closest = incl(r"World<A>::hit_skipping$"), called(r"World<A>::hit_skipping$")
     shadow, n_shadow = incl(r"World<A>::occluded_skipping$"), called(r"World<A>::occluded_skipping$")
     if tiles == 0 or integrator == 0:
-        sys.exit(f"{path}: no render tiles or no integrator in the profile (a build without symbols?)")
+        sys.exit(
+            f"{path}: no render tiles or no integrator in the profile: a build without symbols, or one "
+            "whose `render_with_aovs` closure or `Integrator::radiance8` was inlined into its caller"
+        )
     rows = [
         ("camera rays and film", tiles - integrator, None),
         ("closest-hit queries", closest, n_closest),
