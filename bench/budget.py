@@ -4,8 +4,8 @@
     bench/budget.py CALLGRIND_OUT SAMPLES
 
 Called by bench/budget.sh, which makes the profile. Reads `callgrind_annotate`'s inclusive
-listing (each function's instructions with those of everything it calls) and its calling tree (how often each function was called), and prints per
-camera sample:
+listing (each function's instructions with those of everything it calls) and its calling tree
+(how often each function was called), and prints per camera sample:
 
 - camera rays: the tile loop without the integrator (film and lens samples, the camera rays'
   packets through the structure, their hits' interactions, the film);
