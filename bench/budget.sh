@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A render's instructions per camera sample, by stage (camera rays, closest-hit queries, shadow
-# queries, the path tracer's own work per vertex), counted by callgrind: the same count every
+# queries, the path tracer's own work), counted by callgrind: the same count every
 # run, so two binaries can be compared where the machine's speed drifts too much for timing to
 # show a few per cent. Each binary renders SCENE at 64x64 (SPP, default 64, samples per pixel)
 # on one thread under `valgrind --tool=callgrind`, and bench/budget.py splits the count.
