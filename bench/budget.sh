@@ -24,7 +24,7 @@ RES=64
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 define=()
-grep -q '<default name="scenes"' "$scene" && define=(-D "scenes=$SCENES")
+uses_scenes "$scene" && define=(-D "scenes=$SCENES")
 for bin in "${bins[@]}"; do
     echo "== $bin: $(basename "$scene"), ${RES}x${RES} at $SPP spp, one thread"
     valgrind --tool=callgrind --callgrind-out-file="$tmp/cg.out" "$bin" render "$scene" "${define[@]}" \

@@ -39,12 +39,17 @@ make_mesh() {
 # The median of the numbers on standard input, one per line.
 median() { sort -n | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR+1)/2] : (a[NR/2] + a[NR/2+1]) / 2}'; }
 
+# uses_scenes SCENE: whether a Mitsuba scene finds the shared meshes through a `scenes`
+# parameter (bench/scenes/*.xml), which then gets SCENES (`snell render -D scenes=...`,
+# `mi.load_file(..., scenes=...)`).
+uses_scenes() { grep -q '<default name="scenes"' "$1"; }
+
 # render_time BIN SCENE [ARGS...]: renders SCENE with BIN (to a temporary EXR) and prints the
 # render time in seconds from its summary line; fails if there is none.
 render_time() {
     local bin=$1 scene=$2 define=() out t
     shift 2
-    grep -q '<default name="scenes"' "$scene" && define=(-D "scenes=$SCENES")
+    uses_scenes "$scene" && define=(-D "scenes=$SCENES")
     out=$(mktemp --suffix .exr)
     t=$("$bin" render "$scene" "${define[@]}" -o "$out" "$@" 2>&1 | sed -n 's/.*render \([0-9.]*\) s.*/\1/p')
     rm -f "$out"

@@ -7,12 +7,15 @@
 # against Embree's benchmark built to trace its bounce rays from a file (EB_BOUNCE_FILE;
 # embree_patch.sh, in WORK/replay). Only
 # the `bounce` and `bounce-occluded` rows are printed: the primary rays are the sets' first
-# thousand, a stand-in that `snell bench --rays` needs. SNELL defaults to target/release/snell,
-# ROUNDS to 6. WORK as in vs_embree.sh (default /tmp/snell-embree).
+# thousand, a stand-in that `snell bench --rays` needs. SNELL defaults to target/release/snell
+# (brought up to date first, as in the other scripts), ROUNDS to 6. WORK as in vs_embree.sh (default /tmp/snell-embree).
 set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: $0 MESH [SNELL] [ROUNDS]" >&2; exit 2; }
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
-mesh=$1 snell=$(readlink -f "${2:-$here/../target/release/snell}") rounds=${3:-6}
+mesh=$1 rounds=${3:-6}
+# The Snell binary made absolute, or target/release/snell brought up to date (common.sh).
+source "$here/common.sh" ${2:+"$2"}
+snell=${bins[0]}
 WORK="${WORK:-/tmp/snell-embree}"
 for f in "$WORK/$mesh.ply" "$WORK/$mesh.bin" "$WORK/${mesh}_bounce.f32" "$WORK/${mesh}_primary.f32"; do
     [ -f "$f" ] || { echo "missing $f (run bench/vs_embree.sh with this WORK first)" >&2; exit 1; }

@@ -35,7 +35,7 @@ share() {
 
 for scene in "${render_scenes[@]}"; do
     define=()
-    grep -q '<default name="scenes"' "$scene" && define=("scenes=$SCENES")
+    uses_scenes "$scene" && define=("scenes=$SCENES")
     echo "== $(basename "$scene") at $SPP spp"
     perf record -q -o "$tmp/mitsuba.data" -- python3 bench/mitsuba_time.py "$scene" "$SPP" "$RUNS" "${define[@]}" \
         > "$tmp/mitsuba.times" 2>/dev/null

@@ -24,7 +24,7 @@ for scene in "${render_scenes[@]}"; do
     [ -f "$scene" ] || { echo "missing $scene" >&2; exit 1; }
     # The bench scenes find the shared meshes through their `scenes` parameter.
     define=()
-    grep -q '<default name="scenes"' "$scene" && define=("scenes=$SCENES")
+    uses_scenes "$scene" && define=("scenes=$SCENES")
     mitsuba="$tmp/mitsuba"
     : > "$mitsuba"
     declare -A times=()
