@@ -5,10 +5,11 @@
 # `ray_test` finds them (`pip install mitsuba numpy`; its LLVM variant, as for vs_mitsuba.sh),
 # and runs paired.sh's bounce and any-hit workloads on each set: Snell's `bench --rays`
 # against Embree's benchmark built to trace its bounce rays from a file (EB_BOUNCE_FILE;
-# embree_patch.sh, in WORK/replay). Only
-# the `bounce` and `bounce-occluded` rows are printed: the primary rays are the sets' first
-# thousand, a stand-in that `snell bench --rays` needs. SNELL defaults to target/release/snell
-# (brought up to date first, as in the other scripts), ROUNDS to 6. WORK as in vs_embree.sh (default /tmp/snell-embree).
+# embree_patch.sh, in WORK/replay). Only the `bounce` and `bounce-occluded` rows are printed:
+# the primary rays are the sets' first thousand, a stand-in that `snell bench --rays` needs.
+# SNELL defaults to target/release/snell (brought up to date first, as in the other scripts),
+# ROUNDS to 6. WORK as in vs_embree.sh (default /tmp/snell-embree; a relative WORK is taken
+# from the repository's root, where common.sh moves).
 set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: $0 MESH [SNELL] [ROUNDS]" >&2; exit 2; }
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
