@@ -9,7 +9,8 @@
 #
 # In bench mode A may be Embree's benchmark (`embree_bench`, which vs_embree.sh builds into
 # WORK): it runs on the mesh's `.bin` beside the `.ply` (quality high, AVX2, one thread, the
-# `--reps` given to Snell), its single rays and 16-ray packets taken for Snell's workloads.
+# `--reps` given to Snell), its single rays and 16-ray packets taken for Snell's workloads
+# (and its whole any-hit query for the walk alone that Snell times with `--walk-only`).
 #
 # Each round runs `A ARGS --threads 1` and `B ARGS --threads 1` together (a render as
 # common.sh's `render_time` runs it: to a temporary file, -D scenes=SCENES where the scene has
@@ -57,6 +58,8 @@ run() {
             return 1
         }
         python3 bench/embree_results.py < "$tmp/raw$2" > "$3"
+        # Snell's `--walk-only` walk is set against Embree's whole any-hit query.
+        awk '$1 == "bounce-occluded" { print "bounce-walk", $2 }' "$3" >> "$3"
         return
     fi
     "$1" bench "${args[@]}" --json --threads 1 > "$tmp/raw$2" 2>&1 || {

@@ -44,6 +44,11 @@ pub struct BenchArgs {
     /// Depth limit of the top-down builds (the lecture's 24 by default).
     #[arg(long, default_value_t = AccelParams::default().max_depth as u32, value_parser = clap::value_parser!(u32).range(1..=63))]
     max_depth: u32,
+    /// Also time workload `bounce-walk`: the bounce rays' any-hit walk with every leaf answering
+    /// "not blocked" at once, without its triangle tests (the walk's own cost, a diagnostic).
+    /// BVH accelerators only.
+    #[arg(long)]
+    walk_only: bool,
 }
 
 /// The accelerators `--accel` names, each once, in the order given.
@@ -195,6 +200,13 @@ fn count_occluded<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
     dynamic(rays, |c| c.iter().filter(|r| w.occluded(r, f32::INFINITY)).count())
 }
 
+/// `bounce-walk`: the rays' any-hit walks without triangle tests ([`World::occluded_walk_only`]),
+/// counted as `count_occluded` counts (never blocked, so 0). `run` has checked that the world
+/// has such a walk.
+fn count_walk_only<A: Accel>(w: &World<A>, rays: &[Ray]) -> usize {
+    dynamic(rays, |c| c.iter().filter(|r| w.occluded_walk_only(r, f32::INFINITY) == Some(true)).count())
+}
+
 /// The brute-force oracle is far too slow for a million rays: it traces every `stride`-th
 /// ray, at most 2,048 and at most as many as keep it near 10^8 triangle tests per pass.
 fn subset(rays: &[Ray], kind: AccelKind, tris: usize) -> Vec<Ray> {
@@ -211,6 +223,7 @@ fn subset(rays: &[Ray], kind: AccelKind, tris: usize) -> Vec<Ray> {
 fn trace(world: &AnyWorld, workload: &str, rays: &[Ray]) -> usize {
     with_world!(world, w => match workload {
         "bounce-occluded" => count_occluded(w, rays),
+        "bounce-walk" => count_walk_only(w, rays),
         "primary-packets" => count_closest_packets(w, rays),
         _ => count_closest(w, rays),
     })
@@ -323,7 +336,12 @@ fn workload(mesh: &Mesh, scene: &Scene, args: &BenchArgs) -> Result<Vec<(&'stati
         }
     };
     let tiled = tiles_of_sixteen(&primary, args.width as usize, args.height as usize);
-    Ok(vec![("primary", primary), ("primary-packets", tiled), ("bounce", bounce.clone()), ("bounce-occluded", bounce)])
+    let mut work = vec![("primary", primary), ("primary-packets", tiled), ("bounce", bounce.clone())];
+    if args.walk_only {
+        work.push(("bounce-walk", bounce.clone()));
+    }
+    work.push(("bounce-occluded", bounce));
+    Ok(work)
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
@@ -356,13 +374,22 @@ pub fn run(args: BenchArgs) -> Result<()> {
             Ok((pool.current_num_threads(), pool))
         })
         .collect::<Result<Vec<_>>>()?;
+    if args.walk_only {
+        if let Some(kind) = args.accel.0.iter().find(|k| !matches!(k, AccelKind::Bvh(_))) {
+            clap::Error::raw(
+                clap::error::ErrorKind::ArgumentConflict,
+                format!("--walk-only times a BVH's walk; --accel names {}, which is not a BVH\n", kind.name()),
+            )
+            .exit();
+        }
+    }
     let work = pools[0].1.install(|| workload(mesh, &scene, &args))?;
     if !args.json {
         let threads: Vec<String> = pools.iter().map(|(n, _)| n.to_string()).collect();
         println!(
             "{name}: {tris} triangles, {} primary and {} bounce rays, {} threads, median of {} runs",
             work[0].1.len(),
-            work[1].1.len(),
+            work[2].1.len(),
             threads.join(" and "),
             args.reps
         );
@@ -414,6 +441,17 @@ pub fn run(args: BenchArgs) -> Result<()> {
             (kind, world, secs.into_iter().map(|s| median(s) * 1e3).collect())
         })
         .collect();
+    if args.walk_only {
+        let probe = Ray::new(glam::Vec3::ZERO, glam::Vec3::Z);
+        for (kind, world, _) in &built {
+            if with_world!(world, w => w.occluded_walk_only(&probe, 1.0)).is_none() {
+                anyhow::bail!(
+                    "--walk-only: {} gives this mesh no tree to walk (its triangles are tested as one range)",
+                    kind.name()
+                );
+            }
+        }
+    }
     let rows = measure(&built, &pools, &work, args.reps);
     for r in rows {
         if args.json {

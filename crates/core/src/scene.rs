@@ -1200,6 +1200,23 @@ impl<'s, A: Accel> World<'s, A> {
         }
     }
 
+    /// [`World::occluded`]'s walk alone, a diagnostic for `snell bench --walk-only`: in a world
+    /// that is one untransformed mesh in leaves (as [`World::one_tree`] finds it), its tree
+    /// walked for the ray as an any-hit query walks it, but every leaf answering "not blocked"
+    /// at once, without its triangle tests. So the walk visits every node whose box the ray
+    /// enters, and reaches every leaf, as a ray that nothing blocks does; its time is the
+    /// walk's own (the leaf calls included). `None` in any other world.
+    pub fn occluded_walk_only(&self, ray: &Ray, t_max: f32) -> Option<bool> {
+        let (accel, _) = self.one_tree()?;
+        // Never true (leaf labels are below 2^31); opaque to the compiler, which would
+        // otherwise drop the calls.
+        let test = {
+            #[inline(always)]
+            |leaf: u32, _: f32| std::hint::black_box(leaf) == u32::MAX
+        };
+        Some(accel.any_leaf_inlined(ray, t_max, test, &NoCount))
+    }
+
     /// Whether anything blocks the ray within `0 < t < t_max` (any-hit query).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         self.occluded_skipping(ray, t_max, Skip::NONE)

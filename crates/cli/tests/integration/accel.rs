@@ -303,6 +303,29 @@ fn one_mesh_scenes_match_brute_force() {
     }
 }
 
+/// `World::occluded_walk_only` (`snell bench --walk-only`) walks a one-mesh world's tree with no
+/// triangle test, so it never answers "blocked" where the query does; a world of two objects has
+/// no single tree to walk.
+#[test]
+fn the_walk_alone_tests_no_triangle() {
+    let mut rng = Pcg32::new(5, 9);
+    let scene = scene_of(vec![Geometry::Mesh(Mesh::icosphere(3))], vec![object(0, None)]);
+    let params = BvhParams { split: SplitMethod::Sah, base: AccelParams::default() };
+    let world: World<Bvh> = World::build(&scene, &params);
+    assert!(world.structures().1[0].as_ref().unwrap().stats().leaves > 1);
+    for _ in 0..200 {
+        // From outside the sphere towards a point near its centre: blocked.
+        let o = rand_vec(&mut rng, 1.0).normalize_or(Vec3::X) * 4.0;
+        let r = Ray::new(o, rand_vec(&mut rng, 0.2) - o);
+        assert!(world.occluded(&r, f32::INFINITY), "{r:?}");
+        assert_eq!(world.occluded_walk_only(&r, f32::INFINITY), Some(false), "{r:?}");
+    }
+    let moved = Transform::try_new(Affine3A::from_translation(Vec3::new(3.0, 0.0, 0.0)));
+    let two = scene_of(vec![Geometry::Mesh(Mesh::icosphere(3))], vec![object(0, None), object(0, moved)]);
+    let world: World<Bvh> = World::build(&two, &params);
+    assert_eq!(world.occluded_walk_only(&Ray::new(Vec3::new(0.0, 0.0, 4.0), -Vec3::Z), f32::INFINITY), None);
+}
+
 /// The top level keeps one object per leaf whatever the SAH would prefer: every object's box is
 /// tested before its own structure is entered (merging small objects into one leaf made the
 /// default scene 25 % slower).

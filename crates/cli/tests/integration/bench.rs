@@ -192,3 +192,65 @@ fn a_closed_output_pipe_is_not_a_panic() {
         assert!(o.status.success() || o.status.signal() == Some(13), "{:?}", o.status);
     }
 }
+
+/// `--walk-only` adds `bounce-walk` for each BVH: the bounce rays' walks with no triangle test,
+/// so nothing blocks them, traced as many as `bounce-occluded` traces; other structures are a
+/// misuse of the command line. The summary line counts the bounce rays, not the packets'.
+#[test]
+fn walk_only_times_the_bounce_rays_walk_without_triangle_tests() {
+    let dir = tempfile::tempdir().unwrap();
+    // A sphere of 1,280 triangles, its vertices moved in and out so that some bounce rays
+    // meet it again: a tree of many leaves (the tetrahedra's few triangles are tested as one
+    // range, with no walk).
+    let mut ball = snell_core::shape::Mesh::icosphere(3);
+    let mut rng = snell_core::sampling::Pcg32::new(17, 3);
+    for p in ball.positions.iter_mut() {
+        *p *= 1.0 + 0.3 * rng.next_f32();
+    }
+    let mut obj = String::new();
+    for p in &ball.positions {
+        obj += &format!("v {} {} {}\n", p.x, p.y, p.z);
+    }
+    for [a, b, c] in &ball.indices {
+        obj += &format!("f {} {} {}\n", a + 1, b + 1, c + 1);
+    }
+    let mesh = dir.path().join("ball.obj");
+    std::fs::write(&mesh, obj).unwrap();
+    let args = ["--reps", "1", "--width", "40", "--height", "40", "--threads", "2", "--walk-only"];
+    let o = run(
+        &[&["bench", mesh.to_str().unwrap(), "--json", "--accel", "bvh-sah,bvh-bottomup"][..], &args].concat(),
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.len(), 10, "{out}");
+    for accel in ["bvh-sah", "bvh-bottomup"] {
+        let row = |w: &str| *lines.iter().find(|l| field(l, "accel") == accel && field(l, "workload") == w).unwrap();
+        let (walk, occluded) = (row("bounce-walk"), row("bounce-occluded"));
+        assert_eq!(field(walk, "hits"), "0", "{out}");
+        assert_ne!(field(occluded, "hits"), "0", "{out}");
+        assert_eq!(field(walk, "rays"), field(occluded, "rays"), "{out}");
+    }
+    let o = run(&[&["bench", mesh.to_str().unwrap()][..], &args].concat(), dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let bounce_rays = out
+        .lines()
+        .find(|l| l.starts_with("bvh-sah") && l.contains(" bounce "))
+        .unwrap()
+        .split_whitespace()
+        .nth(5)
+        .unwrap();
+    let tetra = data("two-tetra.obj");
+    let o = run(&[&["bench", tetra.to_str().unwrap()][..], &args].concat(), dir.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("no tree to walk"), "{}", stderr(&o));
+    assert!(out.lines().next().unwrap().contains(&format!("1600 primary and {bounce_rays} bounce rays")), "{out}");
+    assert_ne!(bounce_rays, "1600");
+    for accel in ["grid", "bvh-sah,kdtree", "all"] {
+        let o = run(&[&["bench", mesh.to_str().unwrap(), "--accel", accel][..], &args].concat(), dir.path());
+        assert_eq!(o.status.code(), Some(2), "{accel}: {}", stderr(&o));
+        assert!(stderr(&o).contains("--walk-only") && stderr(&o).contains("not a BVH"), "{accel}: {}", stderr(&o));
+    }
+}
