@@ -1205,7 +1205,8 @@ impl<'s, A: Accel> World<'s, A> {
     /// walked for the ray as an any-hit query walks it, but every leaf answering "not blocked"
     /// at once, without its triangle tests. So the walk visits every node whose box the ray
     /// enters, and reaches every leaf, as a ray that nothing blocks does; its time is the
-    /// walk's own (the leaf calls included). `None` in any other world.
+    /// walk's own, with the leaf test's call where the AVX2 walk calls it (the AVX-512 walk
+    /// inlines it, as it does the real test). `None` in any other world.
     pub fn occluded_walk_only(&self, ray: &Ray, t_max: f32) -> Option<bool> {
         let (accel, _) = self.one_tree()?;
         // Never true (leaf labels are below 2^31); opaque to the compiler, which would

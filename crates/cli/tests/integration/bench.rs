@@ -242,12 +242,12 @@ fn walk_only_times_the_bounce_rays_walk_without_triangle_tests() {
         .split_whitespace()
         .nth(5)
         .unwrap();
+    assert!(out.lines().next().unwrap().contains(&format!("1600 primary and {bounce_rays} bounce rays")), "{out}");
+    assert_ne!(bounce_rays, "1600");
     let tetra = data("two-tetra.obj");
     let o = run(&[&["bench", tetra.to_str().unwrap()][..], &args].concat(), dir.path());
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("no tree to walk"), "{}", stderr(&o));
-    assert!(out.lines().next().unwrap().contains(&format!("1600 primary and {bounce_rays} bounce rays")), "{out}");
-    assert_ne!(bounce_rays, "1600");
     for accel in ["grid", "bvh-sah,kdtree", "all"] {
         let o = run(&[&["bench", mesh.to_str().unwrap(), "--accel", accel][..], &args].concat(), dir.path());
         assert_eq!(o.status.code(), Some(2), "{accel}: {}", stderr(&o));
