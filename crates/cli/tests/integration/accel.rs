@@ -272,10 +272,7 @@ fn one_node_trees_match_brute_force() {
 #[test]
 fn one_mesh_scenes_match_brute_force() {
     let mut rng = Pcg32::new(17, 3);
-    let mut ball = Mesh::icosphere(3);
-    for p in ball.positions.iter_mut() {
-        *p *= 1.0 + 0.3 * rng.next_f32();
-    }
+    let ball = crate::common::bumpy_ball(&mut rng);
     let mut soup = Mesh::default();
     for i in 0..300u32 {
         let c = rand_vec(&mut rng, 1.5);

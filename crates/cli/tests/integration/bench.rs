@@ -199,14 +199,9 @@ fn a_closed_output_pipe_is_not_a_panic() {
 #[test]
 fn walk_only_times_the_bounce_rays_walk_without_triangle_tests() {
     let dir = tempfile::tempdir().unwrap();
-    // A sphere of 1,280 triangles, its vertices moved in and out so that some bounce rays
-    // meet it again: a tree of many leaves (the tetrahedra's few triangles are tested as one
-    // range, with no walk).
-    let mut ball = snell_core::shape::Mesh::icosphere(3);
-    let mut rng = snell_core::sampling::Pcg32::new(17, 3);
-    for p in ball.positions.iter_mut() {
-        *p *= 1.0 + 0.3 * rng.next_f32();
-    }
+    // Some bounce rays meet this ball again; its tree has many leaves (the tetrahedra's few
+    // triangles are tested as one range, with no walk).
+    let ball = crate::common::bumpy_ball(&mut snell_core::sampling::Pcg32::new(17, 3));
     let mut obj = String::new();
     for p in &ball.positions {
         obj += &format!("v {} {} {}\n", p.x, p.y, p.z);

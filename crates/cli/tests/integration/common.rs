@@ -38,3 +38,13 @@ pub fn data(name: &str) -> PathBuf {
 pub fn repo_scene(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name)
 }
+
+/// An icosphere of 1,280 triangles with each vertex moved out by up to 30 % (`rng`'s numbers,
+/// one a vertex): a closed mesh that is not convex, so that rays leaving it may meet it again.
+pub fn bumpy_ball(rng: &mut snell_core::sampling::Pcg32) -> snell_core::shape::Mesh {
+    let mut ball = snell_core::shape::Mesh::icosphere(3);
+    for p in ball.positions.iter_mut() {
+        *p *= 1.0 + 0.3 * rng.next_f32();
+    }
+    ball
+}
