@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Two Snell binaries compared on one workload by running them at the same time, one thread
-# each, each pinned to its own CPU (`taskset`), the CPUs swapped every round: both see the same
-# minute of the machine, whose speed drifts by tens of per cent from one minute to the next, so
+# each, each pinned to its own CPU (`taskset`), the CPUs swapped every round and which one starts
+# first every other pair of rounds: both see the same minute of the machine, whose speed drifts by tens of per cent from one minute to the next, so
 # that a change of a few per cent shows in the per-round ratios where separate runs bury it.
 #
 #   bench/paired.sh A B ROUNDS bench MESH [ARGS...]     tracing (`snell bench`): per workload
@@ -74,8 +74,18 @@ for line in sys.stdin:
 
 for r in $(seq "$rounds"); do
     ca=$((r % 2)) cb=$((1 - r % 2))
-    run "$a" $ca "$tmp/a" & pa=$!
-    run "$b" $cb "$tmp/b" & pb=$!
+    # Which of the two starts first alternates too, every other pair of rounds, so that each
+    # starts first on each CPU equally often: the one started second runs each of its
+    # workloads a little later, beside another phase of the first. (With A always first, one
+    # run of a binary against itself gave B's packets 0.978, slower in all ten pairs; others
+    # were even. A balance, not a measured bias.)
+    if [ $(((r - 1) / 2 % 2)) = 0 ]; then
+        run "$a" $ca "$tmp/a" & pa=$!
+        run "$b" $cb "$tmp/b" & pb=$!
+    else
+        run "$b" $cb "$tmp/b" & pb=$!
+        run "$a" $ca "$tmp/a" & pa=$!
+    fi
     ok=1
     wait $pa || ok=0
     wait $pb || ok=0
