@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Two Snell binaries compared on one workload by running them at the same time, one thread
-# each, each pinned to its own CPU (`taskset`), the CPUs swapped every round and which one starts
-# first every other pair of rounds: both see the same minute of the machine, whose speed drifts by tens of per cent from one minute to the next, so
-# that a change of a few per cent shows in the per-round ratios where separate runs bury it.
+# each, each pinned to its own CPU (`taskset`), the CPUs swapped every round and which one
+# starts first every other pair of rounds: both see the same minute of the machine, whose speed
+# drifts by tens of per cent from one minute to the next, so that a change of a few per cent
+# shows in the per-round ratios where separate runs bury it.
 #
 #   bench/paired.sh A B ROUNDS bench MESH [ARGS...]     tracing (`snell bench`): per workload
 #   bench/paired.sh A B ROUNDS render SCENE [ARGS...]   rendering (`snell render`): render time
@@ -77,8 +78,8 @@ for r in $(seq "$rounds"); do
     # Which of the two starts first alternates too, every other pair of rounds, so that each
     # starts first on each CPU equally often: the one started second runs each of its
     # workloads a little later, beside another phase of the first. (With A always first, one
-    # run of a binary against itself gave B's packets 0.978, slower in all ten pairs; others
-    # were even. A balance, not a measured bias.)
+    # run of a binary against a rebuild of itself gave B's packets 0.978, slower in all ten
+    # pairs; other such runs were even. A balance, not a measured bias.)
     if [ $(((r - 1) / 2 % 2)) = 0 ]; then
         run "$a" $ca "$tmp/a" & pa=$!
         run "$b" $cb "$tmp/b" & pb=$!
