@@ -386,10 +386,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let work = pools[0].1.install(|| workload(mesh, &scene, &args))?;
     if !args.json {
         let threads: Vec<String> = pools.iter().map(|(n, _)| n.to_string()).collect();
+        // By name: the workloads' order depends on the flags (the packets' count once stood
+        // here for the bounce rays').
+        let rays = |name| work.iter().find(|(w, _)| *w == name).map_or(0, |(_, r)| r.len());
         println!(
             "{name}: {tris} triangles, {} primary and {} bounce rays, {} threads, median of {} runs",
-            work[0].1.len(),
-            work[2].1.len(),
+            rays("primary"),
+            rays("bounce"),
             threads.join(" and "),
             args.reps
         );
