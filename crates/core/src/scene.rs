@@ -9,7 +9,7 @@ use crate::geometry::{spawn_ray, spawn_ray_to, Aabb, Ray, Transform};
 use crate::light::{AreaLight, AreaShape, Light, LightSample};
 use crate::material::Material;
 use crate::sampling::build_cdf;
-use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Ray4, Reentry, Sphere, Tri4, TriHit, WatertightRay};
+use crate::shape::{intersect_sphere, intersect_triangle, Mesh, Ray4, Reentry, Sphere, Tri4, TriHit};
 use crate::Rgb;
 
 /// Shared geometry: an object refers to it by index, so many objects (instances) can share
@@ -300,7 +300,7 @@ fn closest_in_blocks(blocks: &[Tri4], r4: &Ray4, t_max: f32, counter: &impl Coun
 /// tree (a transformed object's own slot holds its local ray's).
 #[inline(always)]
 fn shared_ray4<'a>(shared: &'a mut Option<Ray4>, ray: &Ray) -> &'a Ray4 {
-    shared.get_or_insert_with(|| Ray4::new(WatertightRay::new(ray.o, ray.d)))
+    shared.get_or_insert_with(|| Ray4::of(ray))
 }
 
 /// A leaf's block range `a..b` as a leaf label (see [`Accel::relabel_leaves`]): the first

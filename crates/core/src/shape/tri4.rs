@@ -37,7 +37,19 @@ impl Ray4 {
         Ray4 {
             ray,
             #[cfg(target_arch = "x86_64")]
-            lanes: Lanes4::new(&ray),
+            lanes: Lanes4::new(&ray, &ray.o),
+        }
+    }
+
+    /// [`Ray4::new`] for `ray`, its origin and direction read by axis where they lie (see
+    /// [`WatertightRay::of`]).
+    #[inline(always)]
+    pub fn of(ray: &crate::geometry::Ray) -> Ray4 {
+        let w = WatertightRay::of(&ray.o, &ray.d);
+        Ray4 {
+            ray: w,
+            #[cfg(target_arch = "x86_64")]
+            lanes: Lanes4::new(&w, &ray.o),
         }
     }
 }
@@ -256,11 +268,12 @@ struct Lanes4 {
 
 #[cfg(target_arch = "x86_64")]
 impl Lanes4 {
+    /// The lanes of `ray`, whose origin `o` is read by axis where it lies.
     #[inline(always)]
-    fn new(ray: &WatertightRay) -> Lanes4 {
+    fn new(ray: &WatertightRay, o: &Vec3) -> Lanes4 {
         use std::arch::x86_64::_mm_set1_ps;
         let k = ray.axes();
-        let o = ray.o.to_array();
+        let o: &[f32; 3] = o.as_ref();
         // SAFETY: SSE is part of the x86_64 baseline.
         unsafe {
             Lanes4 {

@@ -26,17 +26,28 @@ pub struct WatertightRay {
 impl WatertightRay {
     #[inline]
     pub fn new(o: Vec3, d: Vec3) -> WatertightRay {
+        WatertightRay::of(&o, &d)
+    }
+
+    /// [`WatertightRay::new`] from the origin and direction where they lie: their components
+    /// are read by axis from there. (Indexed in a copy of their own, they were stored to the
+    /// stack and read back at once, a store-to-load round trip on the way to the first
+    /// triangle test.)
+    #[inline(always)]
+    pub fn of(o: &Vec3, d: &Vec3) -> WatertightRay {
         // The dominant axis (x on ties, then y), and x, y swapped for a negative direction along
         // it, to keep the winding. Chosen by arithmetic, not branches: with directions spread
         // over the sphere, the branches were mispredicted about once per ray.
         let a = d.abs();
         let x_max = (a.x >= a.y) & (a.x >= a.z);
         let kz = (!x_max) as usize * (2 - (a.y >= a.z) as usize);
-        let d = d.to_array();
-        let (kx, ky) = ([1, 2, 0][kz], [2, 0, 1][kz]);
-        let swap = (kx ^ ky) * (d[kz] < 0.0) as usize;
+        let dm: &[f32; 3] = d.as_ref();
+        // kx = (kz + 1) mod 3 and ky = (kz + 2) mod 3, two bits per kz in a constant (a table
+        // indexed by kz was written to the stack and read back).
+        let (kx, ky) = ((0b00_10_01 >> (2 * kz)) & 3, (0b01_00_10 >> (2 * kz)) & 3);
+        let swap = (kx ^ ky) * (dm[kz] < 0.0) as usize;
         let (kx, ky) = (kx ^ swap, ky ^ swap);
-        WatertightRay { o, kx, ky, kz, sx: d[kx] / d[kz], sy: d[ky] / d[kz], sz: 1.0 / d[kz] }
+        WatertightRay { o: *o, kx, ky, kz, sx: dm[kx] / dm[kz], sy: dm[ky] / dm[kz], sz: 1.0 / dm[kz] }
     }
 
     /// The permuted axes `[kx, ky, kz]`: `kz` is the dominant axis of the direction.
