@@ -34,22 +34,26 @@ pub struct Ray4 {
 impl Ray4 {
     #[inline]
     pub fn new(ray: WatertightRay) -> Ray4 {
-        Ray4 {
-            ray,
-            #[cfg(target_arch = "x86_64")]
-            lanes: Lanes4::new(&ray, &ray.o),
-        }
+        let o = ray.o;
+        Ray4::with_origin(ray, &o)
     }
 
     /// [`Ray4::new`] for `ray`, its origin and direction read by axis where they lie (see
     /// [`WatertightRay::of`]).
     #[inline(always)]
     pub fn of(ray: &crate::geometry::Ray) -> Ray4 {
-        let w = WatertightRay::of(&ray.o, &ray.d);
+        Ray4::with_origin(WatertightRay::of(&ray.o, &ray.d), &ray.o)
+    }
+
+    /// The lanes of `ray`, whose origin `o` they read by axis.
+    #[inline(always)]
+    fn with_origin(ray: WatertightRay, o: &Vec3) -> Ray4 {
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = o;
         Ray4 {
-            ray: w,
+            ray,
             #[cfg(target_arch = "x86_64")]
-            lanes: Lanes4::new(&w, &ray.o),
+            lanes: Lanes4::new(&ray, o),
         }
     }
 }
