@@ -32,28 +32,15 @@ pub struct Ray4 {
 }
 
 impl Ray4 {
-    #[inline]
-    pub fn new(ray: WatertightRay) -> Ray4 {
-        let o = ray.o;
-        Ray4::with_origin(ray, &o)
-    }
-
-    /// [`Ray4::new`] for `ray`, its origin and direction read by axis where they lie (see
-    /// [`WatertightRay::of`]).
+    /// The watertight set-up of `ray` and its lanes, its origin and direction read by axis where
+    /// they lie (see [`WatertightRay::of`]).
     #[inline(always)]
     pub fn of(ray: &crate::geometry::Ray) -> Ray4 {
-        Ray4::with_origin(WatertightRay::of(&ray.o, &ray.d), &ray.o)
-    }
-
-    /// The lanes of `ray`, whose origin `o` they read by axis.
-    #[inline(always)]
-    fn with_origin(ray: WatertightRay, o: &Vec3) -> Ray4 {
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = o;
+        let w = WatertightRay::of(&ray.o, &ray.d);
         Ray4 {
-            ray,
+            ray: w,
             #[cfg(target_arch = "x86_64")]
-            lanes: Lanes4::new(&ray, o),
+            lanes: Lanes4::new(&w, &ray.o),
         }
     }
 }
@@ -499,7 +486,9 @@ mod tests {
         }
         assert!(scalar[0].is_some(), "the nearer face, which exact arithmetic says the ray crosses, was missed");
         let block = Tri4::pack([(0, near), (1, far)]);
-        let (id, h) = block.closest(&Ray4::new(ray), f32::INFINITY).expect("the block test missed the fold");
+        let (id, h) = block
+            .closest(&Ray4::of(&crate::geometry::Ray::new(o, d)), f32::INFINITY)
+            .expect("the block test missed the fold");
         assert_eq!(id, 0);
         assert_eq!(h.t.to_bits(), scalar[0].unwrap().t.to_bits());
     }
@@ -529,7 +518,7 @@ mod tests {
             let target = if case % 5 == 0 { shared } else { random_point(&mut rng, 1.0) };
             let d = (target - o).normalize();
             let t_max = if case % 3 == 0 { rng.next_f32() * 4.0 } else { f32::INFINITY };
-            let r = Ray4::new(WatertightRay::new(o, d));
+            let r = Ray4::of(&crate::geometry::Ray::new(o, d));
             let mut want = None;
             let mut tm = t_max;
             for (id, [a, b, c]) in &tris {
@@ -593,7 +582,7 @@ mod tests {
                 let target = if (case + i) % 7 == 0 { shared } else { turn(random_point(&mut rng, 1.5)) };
                 crate::geometry::Ray::new(o, (target - o).normalize())
             });
-            let rays: [Ray4; 8] = plain.map(|r| Ray4::new(WatertightRay::new(r.o, r.d)));
+            let rays: [Ray4; 8] = plain.map(|r| Ray4::of(&r));
             let lanes = (rng.next_u32() & 0xff) as u8 | 1;
             let t0: [f32; 8] =
                 std::array::from_fn(|_| if rng.next_f32() < 0.3 { rng.next_f32() * 12.0 } else { f32::INFINITY });
@@ -629,7 +618,7 @@ mod tests {
         );
     }
 
-    /// [`Rays8::from_rays`] makes the axes, origin and shear [`Ray4::new`] makes, bit for bit,
+    /// [`Rays8::from_rays`] makes the axes, origin and shear [`Ray4::of`] makes, bit for bit,
     /// on the directions where the choice is delicate: ties between components, signed zeros,
     /// infinities and NaN; and it declines lanes that permute the axes differently.
     #[cfg(target_arch = "x86_64")]
@@ -658,7 +647,7 @@ mod tests {
             for y in values {
                 for z in values {
                     let d = Vec3::new(x, y, z);
-                    let want = Ray4::new(WatertightRay::new(o, d));
+                    let want = Ray4::of(&crate::geometry::Ray::new(o, d));
                     // SAFETY: AVX2 was detected above.
                     let got = unsafe { Rays8::from_rays(&[crate::geometry::Ray::new(o, d); 8], 0xff) }
                         .expect("eight copies of one ray share their axes");
@@ -688,7 +677,7 @@ mod tests {
     fn unused_lanes_never_hit() {
         let block = Tri4::pack([]);
         assert!(block.is_empty());
-        let r = Ray4::new(WatertightRay::new(Vec3::new(0.0, 0.0, 1.0), -Vec3::Z));
+        let r = Ray4::of(&crate::geometry::Ray::new(Vec3::new(0.0, 0.0, 1.0), -Vec3::Z));
         assert!(block.closest(&r, f32::INFINITY).is_none());
         assert!(!block.any(&r, f32::INFINITY));
     }
