@@ -123,15 +123,25 @@ impl Environment {
         } else {
             a.rem_euclid(1.0)
         };
-        let v = d.y.clamp(-1.0, 1.0).acos() / PI;
+        let v = crate::sampling::acos(d.y.clamp(-1.0, 1.0)) / PI;
         Vec2::new(u, v)
     }
 
-    /// The direction in the environment's frame of image coordinates `uv` (the inverse of the lookup).
+    /// The direction in the environment's frame of image coordinates `uv` (the inverse of the
+    /// lookup): at `φ = 2π u` around and `θ = π v` down from `+y`, their sines and cosines by
+    /// [`cos_sin_turn`] (libm's `sinf`, `sincosf` and `cosf` were three calls a sample).
+    ///
+    /// [`cos_sin_turn`]: crate::sampling::cos_sin_turn
     pub fn direction(uv: Vec2) -> Vec3 {
-        let phi = uv.x * 2.0 * PI;
-        let theta = uv.y * PI;
-        Vec3::new(theta.sin() * phi.sin(), theta.cos(), -theta.sin() * phi.cos())
+        let (cos_p, sin_p) = crate::sampling::cos_sin_turn(uv.x);
+        let (cos_t, sin_t) = Self::cos_sin_theta(uv.y);
+        Vec3::new(sin_t * sin_p, cos_t, -sin_t * cos_p)
+    }
+
+    /// `(cos θ, sin θ)` of image row coordinate `v` (`θ = π v`).
+    #[inline(always)]
+    fn cos_sin_theta(v: f32) -> (f32, f32) {
+        crate::sampling::cos_sin_turn(0.5 * v)
     }
 
     /// Radiance arriving from world direction `-d`, i.e. seen looking along `d`.
@@ -202,7 +212,7 @@ impl Environment {
     /// density `cell_pdf` in the image's `[0, 1)²`.
     #[inline(always)]
     fn pdf_of_cell(cell_pdf: f32, uv: Vec2) -> f32 {
-        let sin = (uv.y * PI).sin();
+        let sin = Self::cos_sin_theta(uv.y).1;
         if sin <= 0.0 {
             return 0.0;
         }
@@ -223,7 +233,7 @@ impl Environment {
             }
             Some(dist) => {
                 let (uv, pdf_uv) = dist.sample(u);
-                let sin = (uv.y * PI).sin();
+                let sin = Self::cos_sin_theta(uv.y).1;
                 if pdf_uv <= 0.0 || sin <= 0.0 {
                     return None;
                 }
