@@ -113,7 +113,9 @@ impl Environment {
     fn uv(d: Vec3) -> Vec2 {
         // `rem_euclid(1.0)`, the same bits, without its call to `fmodf` where `|a| < 1` (an arc
         // tangent over 2π always is): there `a % 1.0` is `a` itself.
-        let a = crate::sampling::atan2(d.x, -d.z) / (2.0 * PI);
+        // (Multiplied by the reciprocals of 2π and π, not divided: two divisions' latency less
+        // on the way to a texel.)
+        let a = crate::sampling::atan2(d.x, -d.z) * (0.5 * std::f32::consts::FRAC_1_PI);
         let u = if a.abs() < 1.0 {
             if a < 0.0 {
                 a + 1.0
@@ -123,7 +125,7 @@ impl Environment {
         } else {
             a.rem_euclid(1.0)
         };
-        let v = crate::sampling::acos(d.y.clamp(-1.0, 1.0)) / PI;
+        let v = crate::sampling::acos(d.y.clamp(-1.0, 1.0)) * std::f32::consts::FRAC_1_PI;
         Vec2::new(u, v)
     }
 

@@ -403,10 +403,13 @@ pub fn atan2(y: f32, x: f32) -> f32 {
     let (ax, ay) = (x.abs(), y.abs());
     let swap = ay > ax;
     let (num, den) = if swap { (ax, ay) } else { (ay, ax) };
-    // 0 / 0 (both zero) is 0; NaN arguments stay NaN.
-    let t = if den == 0.0 { num } else { num / den };
-    let big = t > 0.414_213_57; // tan(π/8)
-    let (base, t) = if big { (FRAC_PI_4, (t - 1.0) / (t + 1.0)) } else { (0.0, t) };
+    // Above tan(π/8) the reduction about π/4, `(t − 1) / (t + 1)` for `t = num / den`, is
+    // taken as `(num − den) / (num + den)`: one division on the way instead of two in a row
+    // (and the difference exact where `num / den ≥ 1/2`). 0 / 0 (both zero) is 0; NaN
+    // arguments stay NaN.
+    let big = num > 0.414_213_57 * den; // tan(π/8)
+    let (base, n, d) = if big { (FRAC_PI_4, num - den, num + den) } else { (0.0, num, den) };
+    let t = if d == 0.0 { n } else { n / d };
     let z = t * t;
     let mut r = base + ((((8.053_744_5e-2 * z - 1.387_768_6e-1) * z + 1.997_771_1e-1) * z - 3.333_295e-1) * z * t + t);
     if swap {
