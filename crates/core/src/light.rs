@@ -224,7 +224,15 @@ impl Environment {
     /// A direction towards the environment for `u` uniform in `[0, 1)²`, by its map where it
     /// has one (uniformly over the sphere otherwise). The sample's point is left at the
     /// origin: [`Light::sample`] puts it at `p + wi` for the shading point `p`.
+    #[cfg(test)]
     fn sample(&self, u: Vec2) -> Option<LightSample> {
+        self.sample_facing(u, None)
+    }
+
+    /// [`Environment::sample`], but `None` for a direction on the other side of `side`'s
+    /// plane than the path ([`Light::sample_facing`]), before its radiance and density are
+    /// looked up.
+    fn sample_facing(&self, u: Vec2, side: Option<(Vec3, bool)>) -> Option<LightSample> {
         let (wi, radiance, pdf) = match self.map.as_ref().and_then(|m| m.distribution.as_ref()) {
             None => {
                 let z = 1.0 - 2.0 * u.x;
@@ -239,9 +247,12 @@ impl Environment {
                 if pdf_uv <= 0.0 || sin <= 0.0 {
                     return None;
                 }
+                let wi = self.to_world * Self::direction(uv);
+                if side.is_some_and(|(ng, front)| crosses_side(wi, ng, front)) {
+                    return None;
+                }
                 // The pdf as `pdf` computes it from the direction, so that MIS weights agree
                 // exactly (rounding can move a direction on a cell border to its neighbour).
-                let wi = self.to_world * Self::direction(uv);
                 let (radiance, pdf) = self.eval_pdf(wi);
                 (wi, radiance, pdf)
             }
@@ -481,6 +492,18 @@ impl Light {
     /// caller's point, stored in two pieces and read back whole, stalled (Cornell box 3 %).
     #[inline(always)]
     pub fn sample(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
+        self.sample_facing(p, u, None)
+    }
+
+    /// [`Light::sample`] for a surface that reflects only (light from the other side of its
+    /// geometric normal `ng` than the path, which arrives from its front where `front`, brings
+    /// it nothing): where `side` is given, an environment drops a direction on the other side
+    /// before it looks up the direction's radiance and density (about half of a surface's
+    /// samples of an image's bright parts; under an HDR image those lookups are most of a
+    /// light sample's cost). The samples it keeps are [`Light::sample`]'s, bit for bit; the
+    /// other lights ignore `side`.
+    #[inline(always)]
+    pub fn sample_facing(&self, p: Vec3, u: Vec2, side: Option<(Vec3, bool)>) -> Option<LightSample> {
         match self {
             Light::Point { position, intensity } => {
                 let d = *position - p;
@@ -506,8 +529,23 @@ impl Light {
             // The environment's sample without `p`: given it, the out-of-line call took the
             // point's address, which kept it in memory for every light, stored in two pieces
             // and read back in others (a store-forwarding stall on every light sample).
-            Light::Environment(e) => e.sample(u).map(|s| LightSample { p: (p + Vec3::from(s.wi)).into(), ..s }),
+            Light::Environment(e) => {
+                e.sample_facing(u, side).map(|s| LightSample { p: (p + Vec3::from(s.wi)).into(), ..s })
+            }
         }
+    }
+}
+
+/// Whether direction `wi` lies on the other side of the plane with normal `ng` than a path
+/// arriving from its front (`front`) or back: `wi · ng` of the other sign, as the path tracer
+/// tells a light sample's side (a NaN product is on neither side).
+#[inline(always)]
+fn crosses_side(wi: Vec3, ng: Vec3, front: bool) -> bool {
+    let c = wi.dot(ng);
+    if front {
+        c <= 0.0
+    } else {
+        c > 0.0
     }
 }
 
@@ -847,6 +885,43 @@ mod tests {
         let far = rectangle(Vec3::new(-0.05, -0.05, 20.0), Vec3::new(0.0, 0.1, 0.0), Vec3::new(0.1, 0.0, 0.0));
         let e = irradiance(&far, 10_000);
         assert!((e - 0.01 / 400.0).abs() < 1e-3 * 0.01 / 400.0, "{e}");
+    }
+
+    /// `sample_facing` keeps `sample`'s samples bit for bit and drops, from an image, exactly
+    /// those on the other side of the given plane than the path; without a side, or from a
+    /// constant environment, it drops nothing. It fails if the drop looks at the wrong side
+    /// (`c > 0.0` for a path from the front) or drops a sample `sample` keeps.
+    #[test]
+    fn facing_samples_are_the_samples_from_the_paths_side() {
+        let mut rng = Pcg32::new(31, 32);
+        let p = Vec3::new(0.3, -1.0, 2.0);
+        for (e, image) in [(env(None), false), (env(Some(test_map())), true)] {
+            let light = Light::Environment(e);
+            let mut dropped = 0;
+            for _ in 0..20_000 {
+                let u = rng.next_2d();
+                let ng = Environment::direction(rng.next_2d());
+                let front = rng.next_f32() < 0.5;
+                let all = light.sample(p, u);
+                assert_eq!(bits(light.sample_facing(p, u, None)), bits(all));
+                let facing = light.sample_facing(p, u, Some((ng, front)));
+                // The other side: `wi · ng` positive for a path from the back, not for one
+                // from the front.
+                let other = |s: &LightSample| (Vec3::from(s.wi).dot(ng) > 0.0) != front;
+                match (&all, &facing) {
+                    (Some(a), None) => {
+                        assert!(image && other(a), "dropped from the path's side");
+                        dropped += 1;
+                    }
+                    (Some(a), Some(_)) => {
+                        assert!(!image || !other(a), "kept from the other side");
+                        assert_eq!(bits(facing), bits(all));
+                    }
+                    (None, f) => assert!(f.is_none()),
+                }
+            }
+            assert_eq!(dropped > 5_000, image, "{dropped} dropped");
+        }
     }
 
     /// Samples as a comparable tuple of bits (`LightSample` has no `PartialEq`).

@@ -146,7 +146,17 @@ impl Draws {
         if !shade.bsdf.is_delta() {
             if let Some((li, p_choose)) = world.choose_light(rng.next_f32()) {
                 let u = rng.next_2d();
-                light = world.lights[li].sample(shade.hit.p, u).map(|ls| (li, p_choose, ls));
+                // A Lambertian surface reflects nothing of a light sample from the other side
+                // of its geometric normal than the path (`light_reaches` is then false, or the
+                // directions lie in opposite hemispheres, where `diffuse_eval` is zero): the
+                // light may drop such a sample early. (Not for a NaN direction of arrival,
+                // whose sample `light_reaches` judges otherwise.)
+                let c = shade.wo_world.dot(shade.ng);
+                let side = match shade.bsdf {
+                    Bsdf::Diffuse { .. } if !c.is_nan() => Some((shade.ng, c > 0.0)),
+                    _ => None,
+                };
+                light = world.lights[li].sample_facing(shade.hit.p, u, side).map(|ls| (li, p_choose, ls));
             }
         }
         let uc = rng.next_f32();
@@ -577,6 +587,34 @@ impl Integrator for Path {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What lets `Draws::take` drop a Lambertian vertex's light samples from the other side
+    /// of its geometric normal than the path: for every such direction the vertex's light
+    /// contribution is zero (`light_reaches` false, or `diffuse_eval` zero), whatever the
+    /// shading normal. Over random geometric and shading normals, directions of arrival and
+    /// light directions.
+    #[test]
+    fn lambertian_light_from_the_other_side_contributes_nothing() {
+        let mut rng = crate::sampling::Pcg32::new(41, 42);
+        let unit = |rng: &mut crate::sampling::Pcg32| crate::light::Environment::direction(rng.next_2d());
+        let mut checked = 0;
+        for _ in 0..200_000 {
+            let (ng, wo_world, ls_wi) = (unit(&mut rng), unit(&mut rng), unit(&mut rng));
+            // A shading normal near the geometric one, as interpolated normals are.
+            let ns = (ng + 0.5 * unit(&mut rng)).normalize();
+            let front = wo_world.dot(ng) > 0.0;
+            let c = ls_wi.dot(ng);
+            if (front && c > 0.0) || (!front && c <= 0.0) {
+                continue;
+            }
+            let frame = Frame::new(ns);
+            let (wo, wi) = (frame.to_local(wo_world), frame.to_local(ls_wi));
+            let f = if light_reaches(ng, wo_world, ls_wi, wo, wi) { diffuse_eval(Rgb::ONE, wo, wi) } else { Rgb::ZERO };
+            assert_eq!(f, Rgb::ZERO, "ng {ng} wo {wo_world} wi {ls_wi} ns {ns}");
+            checked += 1;
+        }
+        assert!(checked > 50_000);
+    }
 
     #[test]
     fn power_heuristic_weights_sum_to_one() {
