@@ -109,7 +109,11 @@ impl EnvMap {
 }
 
 impl Environment {
-    /// Image coordinates of a direction in the environment's frame.
+    /// Image coordinates of a direction in the environment's frame, of any length: both
+    /// angles by [`atan2`], which needs no unit vector (a normalisation and an arc cosine were
+    /// two square roots and two divisions on the way to a texel).
+    ///
+    /// [`atan2`]: crate::sampling::atan2
     fn uv(d: Vec3) -> Vec2 {
         // `rem_euclid(1.0)`, the same bits, without its call to `fmodf` where `|a| < 1` (an arc
         // tangent over 2π always is): there `a % 1.0` is `a` itself.
@@ -125,7 +129,7 @@ impl Environment {
         } else {
             a.rem_euclid(1.0)
         };
-        let v = crate::sampling::acos(d.y.clamp(-1.0, 1.0)) * std::f32::consts::FRAC_1_PI;
+        let v = crate::sampling::atan2((d.x * d.x + d.z * d.z).sqrt(), d.y) * std::f32::consts::FRAC_1_PI;
         Vec2::new(u, v)
     }
 
@@ -166,7 +170,7 @@ impl Environment {
     /// Image coordinates of world direction `d`.
     #[inline(always)]
     fn local_uv(&self, d: Vec3) -> Vec2 {
-        Self::uv(self.to_world.transpose() * d.normalize())
+        Self::uv(self.to_world.transpose() * d)
     }
 
     /// [`Environment::eval`] and [`Environment::pdf`] of one direction at once, its image

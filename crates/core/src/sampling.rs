@@ -421,16 +421,6 @@ pub fn atan2(y: f32, x: f32) -> f32 {
     r.copysign(y)
 }
 
-/// `acos(x)` in `[0, π]` for `x` in `[−1, 1]`, within 4·10⁻⁷ rad of the exact value: the
-/// angle whose cosine is `x` and sine `√((1 − x)(1 + x))` by [`atan2`] (both factors exact
-/// near `|x| = 1`, where `1 − x²` would cancel). An environment image's lookup takes one per
-/// direction, where libm's `acosf` was a call of about 40 instructions. NaN gives NaN; `x`
-/// beyond `±1` gives 0 or π.
-#[inline]
-pub fn acos(x: f32) -> f32 {
-    atan2(((1.0 - x) * (1.0 + x)).max(0.0).sqrt(), x)
-}
-
 /// `x.round()` (halves away from zero), the same bits, without a call. The release build
 /// targets x86-64's baseline, which has no rounding instruction (SSE4.1's `roundss`), so
 /// `f32::round` is a call to `roundf` through the GOT: about 30 instructions on every
@@ -777,28 +767,6 @@ mod tests {
         // Beyond the reduced range and for NaN: libm's answer.
         assert_eq!(sin_cos_f64(100.0), 100.0f64.sin_cos());
         assert!(sin_cos_f64(f64::NAN).0.is_nan());
-    }
-
-    /// The polynomial arc cosine against f64's, over the whole range, densely near ±1 and 0,
-    /// and exact at the ends: 0 at 1, π at −1.
-    #[test]
-    fn polynomial_acos_matches_f64() {
-        let mut worst = 0.0f64;
-        let mut check = |x: f32| worst = worst.max((acos(x) as f64 - (x as f64).acos()).abs());
-        let n = 1_000_000;
-        for i in 0..=n {
-            check(-1.0 + 2.0 * i as f32 / n as f32);
-        }
-        for k in 0..4096 {
-            let e = k as f32 * 1e-7;
-            for x in [1.0 - e, -1.0 + e, e, -e] {
-                check(x);
-            }
-        }
-        assert!(worst < 4e-7, "{worst:e}");
-        assert_eq!(acos(1.0), 0.0);
-        assert_eq!(acos(-1.0), std::f32::consts::PI);
-        assert!(acos(f32::NAN).is_nan());
     }
 
     #[test]
