@@ -106,6 +106,21 @@ impl EnvMap {
     fn lookup(&self, uv: Vec2) -> Rgb {
         Rgb::from_array(self.texel(uv).rgb)
     }
+
+    /// Asks for the texel at `uv` to be brought into the caches (a hint, no other effect).
+    #[inline(always)]
+    fn prefetch(&self, uv: Vec2) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: a prefetch is a hint with no memory effect.
+        unsafe {
+            std::arch::x86_64::_mm_prefetch(
+                std::ptr::from_ref(self.texel(uv)).cast::<i8>(),
+                std::arch::x86_64::_MM_HINT_T0,
+            )
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = uv;
+    }
 }
 
 impl Environment {
@@ -157,14 +172,33 @@ impl Environment {
     /// which stalls: ~13 % of a camera sample that misses).
     #[inline(always)]
     pub fn eval(&self, d: Vec3) -> Rgb {
+        self.eval_at(d, None)
+    }
+
+    /// [`Environment::eval`] with `d`'s image coordinates from [`Environment::lookup_ahead`]
+    /// where they were made (`None`: worked out here): the same value.
+    #[inline(always)]
+    pub fn eval_at(&self, d: Vec3, uv: Option<Vec2>) -> Rgb {
         match &self.map {
             None => self.scale,
-            Some(m) => self.scale * self.eval_map(m, d),
+            Some(m) => self.scale * self.eval_map(m, d, uv),
         }
     }
 
-    fn eval_map(&self, m: &EnvMap, d: Vec3) -> Rgb {
-        m.lookup(self.local_uv(d))
+    fn eval_map(&self, m: &EnvMap, d: Vec3, uv: Option<Vec2>) -> Rgb {
+        m.lookup(uv.unwrap_or_else(|| self.local_uv(d)))
+    }
+
+    /// Where world direction `d` looks up the image: its image coordinates (`None` without an
+    /// image), with the load of its texel started (a prefetch). A path makes them as its next
+    /// segment sets out, so that, should the segment leave the scene, its texel (a cache miss
+    /// in a large image) has arrived by the time [`Environment::eval_pdf_at`] reads it.
+    #[inline]
+    pub fn lookup_ahead(&self, d: Vec3) -> Option<Vec2> {
+        let m = self.map.as_ref()?;
+        let uv = self.local_uv(d);
+        m.prefetch(uv);
+        Some(uv)
     }
 
     /// Image coordinates of world direction `d`.
@@ -178,10 +212,17 @@ impl Environment {
     /// as each alone. Inlined, as `eval` is, for a constant environment's sake.
     #[inline(always)]
     pub fn eval_pdf(&self, d: Vec3) -> (Rgb, f32) {
+        self.eval_pdf_at(d, None)
+    }
+
+    /// [`Environment::eval_pdf`] with `d`'s image coordinates from
+    /// [`Environment::lookup_ahead`] where they were made: the same values.
+    #[inline(always)]
+    pub fn eval_pdf_at(&self, d: Vec3, uv: Option<Vec2>) -> (Rgb, f32) {
         match &self.map {
             None => (self.scale, 1.0 / (4.0 * PI)),
             Some(m) => {
-                let (radiance, pdf) = self.eval_pdf_map(m, d);
+                let (radiance, pdf) = self.eval_pdf_map(m, d, uv);
                 (radiance.into(), pdf)
             }
         }
@@ -190,8 +231,8 @@ impl Environment {
     /// [`Environment::eval_pdf`] of a map. The radiance comes back in 16-byte lanes: as an
     /// `Rgb` it was merged with a constant environment's through memory, written in two pieces
     /// and read back in two others (a store-forwarding stall on every path that escapes).
-    fn eval_pdf_map(&self, m: &EnvMap, d: Vec3) -> (Vec3A, f32) {
-        let uv = self.local_uv(d);
+    fn eval_pdf_map(&self, m: &EnvMap, d: Vec3, uv: Option<Vec2>) -> (Vec3A, f32) {
+        let uv = uv.unwrap_or_else(|| self.local_uv(d));
         let t = m.texel(uv);
         let pdf = match &m.distribution {
             None => 1.0 / (4.0 * PI),
@@ -1120,7 +1161,7 @@ mod tests {
     fn environment_radiance_and_density_together_are_each_alone() {
         // `eval_pdf` is `(eval, pdf)` bit for bit, for a constant environment, a rotated image
         // and an image whose distribution is missing (all black), over directions that are
-        // not unit too.
+        // not unit too; so are `eval_pdf_at` and `eval_at` given `lookup_ahead`'s coordinates.
         let black = EnvMap::new(2, 2, vec![Rgb::ZERO; 4]).unwrap();
         assert!(black.distribution.is_none());
         let mut rng = Pcg32::new(11, 12);
@@ -1131,6 +1172,13 @@ mod tests {
                 let (radiance, pdf) = e.eval_pdf(d);
                 assert_eq!(radiance.to_array().map(f32::to_bits), e.eval(d).to_array().map(f32::to_bits), "{d}");
                 assert_eq!(pdf.to_bits(), e.pdf(d).to_bits(), "{d}");
+                // And the same again from the image coordinates a path makes ahead.
+                let ahead = e.lookup_ahead(d);
+                assert_eq!(ahead.is_some(), e.map.is_some());
+                let (r2, p2) = e.eval_pdf_at(d, ahead);
+                assert_eq!(r2.to_array().map(f32::to_bits), radiance.to_array().map(f32::to_bits), "{d}");
+                assert_eq!(p2.to_bits(), pdf.to_bits(), "{d}");
+                assert_eq!(e.eval_at(d, ahead).to_array().map(f32::to_bits), radiance.to_array().map(f32::to_bits));
             }
         }
     }

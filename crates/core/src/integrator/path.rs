@@ -96,6 +96,12 @@ struct PathState {
     prev_p: Vec3,
     eta_scale: f32,
     depth: u32,
+    /// Where the current segment's direction looks up the environment's image, made as the
+    /// segment set out ([`Environment::lookup_ahead`]); `None` for the camera's segment and
+    /// without an image.
+    ///
+    /// [`Environment::lookup_ahead`]: crate::light::Environment::lookup_ahead
+    env_uv: Option<Vec2>,
 }
 
 impl PathState {
@@ -110,6 +116,7 @@ impl PathState {
             prev_p: camera_ray.o,
             eta_scale: 1.0,
             depth: 0,
+            env_uv: None,
         }
     }
 }
@@ -294,9 +301,9 @@ impl Path {
             if let Some((li, env)) = world.environment() {
                 // Radiance and density from one lookup of the direction's image coordinates.
                 let (radiance, w) = if st.prev_delta {
-                    (env.eval(st.dir), 1.0)
+                    (env.eval_at(st.dir, st.env_uv), 1.0)
                 } else {
-                    let (radiance, pdf) = env.eval_pdf(st.dir);
+                    let (radiance, pdf) = env.eval_pdf_at(st.dir, st.env_uv);
                     (radiance, power_heuristic(st.prev_pdf, world.light_probability(li) * pdf))
                 };
                 st.l += st.beta * Vec3A::from(radiance) * w;
@@ -427,6 +434,7 @@ impl Path {
         if st.beta.max_element() <= 0.0 || !st.beta.is_finite() {
             return None;
         }
+        st.env_uv = world.environment().and_then(|(_, e)| e.lookup_ahead(ray.d));
         Some((ray, world.leaving(obj, p, ng, ray.d)))
     }
 }
