@@ -589,7 +589,8 @@ pub struct Distribution2D {
     row_guides: Vec<u32>,
     /// Running sums of the rows' totals.
     marginal: Vec<f32>,
-    marginal_guide: [u32; GUIDE_BUCKETS + 1],
+    /// The marginal's guide table (on the heap: inline, it made every light 440 bytes).
+    marginal_guide: Vec<u32>,
 }
 
 impl Distribution2D {
@@ -601,7 +602,7 @@ impl Distribution2D {
         let rows: Vec<f32> = weights.chunks(width).flat_map(|r| build_cdf(r.iter().copied())).collect();
         let row_guides = rows.chunks(width).flat_map(cdf_guide).collect();
         let marginal = build_cdf(rows.chunks(width).map(|r| r[width - 1]));
-        let marginal_guide = cdf_guide(&marginal);
+        let marginal_guide = cdf_guide(&marginal).to_vec();
         (*marginal.last()? > 0.0).then_some(Distribution2D {
             width,
             height,
