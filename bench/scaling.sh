@@ -8,7 +8,8 @@
 #   in the same process, came out 20-60 % slower on two threads than alone: 12-15 against
 #   9-10 ms on the bunny);
 # - rendering: `snell render SCENE --threads 1` then `--threads 2`, ROUNDS (default 3) times, on
-#   the Cornell box and the bunny and dragon under a constant environment, 256x256, 64 spp.
+#   the Cornell box, the bunny and dragon under a constant environment and the bunny under an HDR
+#   map, 256x256, 64 spp.
 # First, what the machine itself gives two threads in this hour (bench/machine_scaling.c: loops of
 # arithmetic and of dependent loads, nothing of Snell's), where a C compiler is installed.
 #
