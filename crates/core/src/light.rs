@@ -95,11 +95,12 @@ impl EnvMap {
     }
 
     /// The texel at image coordinates `uv` (the nearest pixel): the cell whose density
-    /// `Distribution2D::pdf` gives at `uv`.
+    /// `Distribution2D::pdf` gives at `uv` (both by [`grid_cell`]).
+    ///
+    /// [`grid_cell`]: crate::sampling::grid_cell
     #[inline(always)]
     fn texel(&self, uv: Vec2) -> &Texel {
-        let x = ((uv.x * self.width as f32) as usize).min(self.width - 1);
-        let y = ((uv.y * self.height as f32) as usize).min(self.height - 1);
+        let (x, y) = crate::sampling::grid_cell(uv, self.width, self.height);
         &self.texels[y * self.width + x]
     }
 
@@ -130,20 +131,11 @@ impl Environment {
     ///
     /// [`atan2`]: crate::sampling::atan2
     fn uv(d: Vec3) -> Vec2 {
-        // `rem_euclid(1.0)`, the same bits, without its call to `fmodf` where `|a| < 1` (an arc
-        // tangent over 2π always is): there `a % 1.0` is `a` itself.
-        // (Multiplied by the reciprocals of 2π and π, not divided: two divisions' latency less
-        // on the way to a texel.)
+        // Multiplied by the reciprocals of 2π and π, not divided: two divisions' latency less
+        // on the way to a texel. `a` lies within ±1/2 (to rounding) or is NaN, where `rem_euclid(1.0)`
+        // is this, the same bits, without its call to `fmodf`.
         let a = crate::sampling::atan2(d.x, -d.z) * (0.5 * std::f32::consts::FRAC_1_PI);
-        let u = if a.abs() < 1.0 {
-            if a < 0.0 {
-                a + 1.0
-            } else {
-                a
-            }
-        } else {
-            a.rem_euclid(1.0)
-        };
+        let u = if a < 0.0 { a + 1.0 } else { a };
         let v = crate::sampling::atan2((d.x * d.x + d.z * d.z).sqrt(), d.y) * std::f32::consts::FRAC_1_PI;
         Vec2::new(u, v)
     }

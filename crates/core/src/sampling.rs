@@ -575,6 +575,16 @@ fn sample_guided_cdf(cdf: &[f32], guide: &[u32], u: f32) -> (usize, f32) {
     cdf_interval(cdf, i, x)
 }
 
+/// The cell `(x, y)` of a `width × height` grid over `[0, 1)²` that holds `p` (the last row or
+/// column for coordinates of 1 or more, the first for negative ones or NaN): where
+/// [`Distribution2D::pdf`] finds a density, and an environment image the pixel it shows.
+#[inline(always)]
+pub fn grid_cell(p: Vec2, width: usize, height: usize) -> (usize, usize) {
+    let x = ((p.x * width as f32) as usize).min(width - 1);
+    let y = ((p.y * height as f32) as usize).min(height - 1);
+    (x, y)
+}
+
 /// A piecewise-constant 2D distribution over `[0, 1)²` on a `width × height` grid of
 /// non-negative weights (pbrt's `PiecewiseConstant2D`): a marginal over rows, a conditional
 /// per row, each searched through a guide table ([`cdf_guide`]). The rows' running sums lie
@@ -619,21 +629,18 @@ impl Distribution2D {
         &self.rows[y * self.width..(y + 1) * self.width]
     }
 
+    /// Row `y`'s guide table.
+    #[inline(always)]
+    fn row_guide(&self, y: usize) -> &[u32] {
+        &self.row_guides[y * (GUIDE_BUCKETS + 1)..(y + 1) * (GUIDE_BUCKETS + 1)]
+    }
+
     /// A point in `[0, 1)²` and its density (with respect to area in `[0, 1)²`).
     pub fn sample(&self, u: Vec2) -> (Vec2, f32) {
         let (y, fy) = sample_guided_cdf(&self.marginal, &self.marginal_guide, u.y);
-        let g = (GUIDE_BUCKETS + 1) * y;
-        let (x, fx) = sample_guided_cdf(self.row(y), &self.row_guides[g..g + GUIDE_BUCKETS + 1], u.x);
+        let (x, fx) = sample_guided_cdf(self.row(y), self.row_guide(y), u.x);
         let p = Vec2::new((x as f32 + fx) / self.width as f32, (y as f32 + fy) / self.height as f32);
         (p, self.pdf(p))
-    }
-
-    /// The cell of `p ∈ [0, 1)²`: `(x, y)`.
-    #[inline(always)]
-    fn cell(&self, p: Vec2) -> (usize, usize) {
-        let x = ((p.x * self.width as f32) as usize).min(self.width - 1);
-        let y = ((p.y * self.height as f32) as usize).min(self.height - 1);
-        (x, y)
     }
 
     /// The density in cell `(x, y)`.
@@ -646,7 +653,7 @@ impl Distribution2D {
 
     /// The density at `p ∈ [0, 1)²`.
     pub fn pdf(&self, p: Vec2) -> f32 {
-        let (x, y) = self.cell(p);
+        let (x, y) = grid_cell(p, self.width, self.height);
         self.cell_pdf(x, y)
     }
 }

@@ -158,9 +158,11 @@ impl Draws {
                 // directions lie in opposite hemispheres, where `diffuse_eval` is zero): the
                 // light may drop such a sample early. (Not for a NaN direction of arrival,
                 // whose sample `light_reaches` judges otherwise.)
-                let c = shade.wo_world.dot(shade.ng);
                 let side = match shade.bsdf {
-                    Bsdf::Diffuse { .. } if !c.is_nan() => Some((shade.ng, c > 0.0)),
+                    Bsdf::Diffuse { .. } => {
+                        let c = shade.wo_world.dot(shade.ng);
+                        (!c.is_nan()).then_some((shade.ng, c > 0.0))
+                    }
                     _ => None,
                 };
                 light = world.lights[li].sample_facing(shade.hit.p, u, side).map(|ls| (li, p_choose, ls));
