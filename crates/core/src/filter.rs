@@ -89,7 +89,7 @@ impl Filter {
 /// The unnormalised Gaussian of standard deviation `sigma` at `x`.
 #[inline]
 fn gaussian(x: f32, sigma: f32) -> f32 {
-    (-(x * x) / (2.0 * sigma * sigma)).exp()
+    crate::sampling::exp(-(x * x) / (2.0 * sigma * sigma))
 }
 
 #[cfg(test)]

@@ -43,7 +43,7 @@ impl Microfacet {
                 let k = a2 + tan2;
                 a2 / (PI * c2 * c2 * k * k)
             }
-            Distribution::Beckmann => (-tan2 / a2).exp() / (PI * a2 * c2 * c2),
+            Distribution::Beckmann => crate::sampling::exp(-tan2 / a2) / (PI * a2 * c2 * c2),
         }
     }
 
