@@ -120,7 +120,7 @@ pub enum Material {
     /// `roughplastic`): the coat reflects Fresnel's share, smooth (`roughness = 0`, an ideal
     /// mirror lobe) or rough (a microfacet lobe of that `alpha`), scaled by `specular`; the rest
     /// reaches the base. Build with [`Material::plastic`], which tabulates the coat.
-    Plastic { diffuse: Texture, specular: Rgb, ior: f32, roughness: f32, distribution: Distribution, coat: CoatTable },
+    Plastic { diffuse: Texture, specular: Rgb, ior: f32, roughness: f32, distribution: Distribution, coat: Box<CoatTable> },
     /// Metal with Fresnel from the complex index of refraction `eta + i·k` per RGB channel:
     /// an ideal mirror (`roughness = 0`) or microfacet reflection with that `alpha`.
     Conductor { eta: Rgb, k: Rgb, roughness: f32, distribution: Distribution },
@@ -147,7 +147,7 @@ fn microfacet(roughness: f32, distribution: Distribution) -> Option<Microfacet> 
 impl Material {
     /// A plastic, with its coat tabulated (see [`CoatTable`]).
     pub fn plastic(diffuse: Texture, specular: Rgb, ior: f32, roughness: f32, distribution: Distribution) -> Material {
-        let coat = CoatTable::new(ior, microfacet(roughness, distribution));
+        let coat = Box::new(CoatTable::new(ior, microfacet(roughness, distribution)));
         Material::Plastic { diffuse, specular, ior, roughness, distribution, coat }
     }
 
