@@ -140,12 +140,19 @@ const SPLAT_SPAN: usize = 2 * MAX_SPLAT_MARGIN as usize + 1;
 /// how many there are. Pixels of weight zero are left out.
 #[inline]
 fn splat_weights(filter: &Filter, f: f32, c: u32, m: u32, n: u32, out: &mut [(u32, f32); SPLAT_SPAN]) -> usize {
+    let (lo, hi) = (c.saturating_sub(m), (c + m).min(n - 1));
     let mut k = 0;
-    for p in c.saturating_sub(m)..=(c + m).min(n - 1) {
-        let wt = filter.eval_1d(f - (p as f32 + 0.5));
-        if wt != 0.0 {
-            out[k] = (p, wt);
-            k += 1;
+    // Eight pixels at a time, their weights worked out in lanes ([`Filter::eval_1d_8`]). (A
+    // pixel's index converts through `i32`, the same value below 2^31, as SSE2 converts only
+    // signed integers.)
+    for p0 in (lo..=hi).step_by(8) {
+        let x: [f32; 8] = std::array::from_fn(|j| f - ((p0 + j as u32) as i32 as f32 + 0.5));
+        let wt = filter.eval_1d_8(&x);
+        for (j, &wt) in wt.iter().enumerate().take((hi - p0 + 1) as usize) {
+            if wt != 0.0 {
+                out[k] = (p0 + j as u32, wt);
+                k += 1;
+            }
         }
     }
     k

@@ -454,19 +454,28 @@ pub fn round(x: f32) -> f32 {
 /// between −104 and −87 (subnormal results), above 88 and for NaN, `expf` itself.
 #[inline]
 pub fn exp(x: f32) -> f32 {
-    const LOG2_E: f32 = std::f32::consts::LOG2_E;
-    const LN2_HI: f32 = 0.693_145_75; // 0x3f317200: k · LN2_HI is exact for |k| < 2^8
-    const LN2_LO: f32 = 1.428_606_8e-6; // ln 2 − LN2_HI
-    const ROUNDER: f32 = 12_582_912.0; // 1.5 · 2^23: adding it rounds to an integer
     if !(-87.0..=88.0).contains(&x) {
         return if x < -104.0 { 0.0 } else { x.exp() };
     }
-    let k = (x * LOG2_E + ROUNDER) - ROUNDER;
+    exp_in_range(x)
+}
+
+/// [`exp`] for `x` in `[−87, 88]`, where it is a normal float; outside that range the result is
+/// wrong. Without a branch, so that a loop over lanes of it is vectorised.
+#[inline(always)]
+pub fn exp_in_range(x: f32) -> f32 {
+    const LN2_HI: f32 = 0.693_145_75; // 0x3f317200: k · LN2_HI is exact for |k| < 2^8
+    const LN2_LO: f32 = 1.428_606_8e-6; // ln 2 − LN2_HI
+    const ROUNDER: f32 = 12_582_912.0; // 1.5 · 2^23: adding it rounds to an integer
+    let biased = x * std::f32::consts::LOG2_E + ROUNDER;
+    let k = biased - ROUNDER;
     let r = (x - k * LN2_HI) - k * LN2_LO;
     let p = (((1.375_176e-3 * r + 8.368_915e-3) * r + 4.166_952_5e-2) * r + 1.666_651_8e-1) * r + 0.499_999_88;
     let er = 1.0 + (r + r * r * p);
-    // `k` lies in [−126, 127], so `2ᵏ` is a normal float.
-    er * f32::from_bits(((k as i32 + 127) as u32) << 23)
+    // `biased` is 1.5 · 2^23 + k, so its bits are ROUNDER's plus `k`; `k` lies in [−126, 127],
+    // so `2ᵏ` is a normal float.
+    let k_bits = biased.to_bits().wrapping_sub(ROUNDER.to_bits());
+    er * f32::from_bits(k_bits.wrapping_add(127) << 23)
 }
 
 /// `(cos 2πu, sin 2πu)` for `u` in `[0, 1]`: the nearest quarter turn is taken out exactly

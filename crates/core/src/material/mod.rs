@@ -120,7 +120,14 @@ pub enum Material {
     /// `roughplastic`): the coat reflects Fresnel's share, smooth (`roughness = 0`, an ideal
     /// mirror lobe) or rough (a microfacet lobe of that `alpha`), scaled by `specular`; the rest
     /// reaches the base. Build with [`Material::plastic`], which tabulates the coat.
-    Plastic { diffuse: Texture, specular: Rgb, ior: f32, roughness: f32, distribution: Distribution, coat: Box<CoatTable> },
+    Plastic {
+        diffuse: Texture,
+        specular: Rgb,
+        ior: f32,
+        roughness: f32,
+        distribution: Distribution,
+        coat: Box<CoatTable>,
+    },
     /// Metal with Fresnel from the complex index of refraction `eta + i·k` per RGB channel:
     /// an ideal mirror (`roughness = 0`) or microfacet reflection with that `alpha`.
     Conductor { eta: Rgb, k: Rgb, roughness: f32, distribution: Distribution },
