@@ -7,7 +7,7 @@ use glam::{Vec2, Vec3, Vec3A};
 
 use crate::geometry::orthonormal_basis;
 use crate::lanes::F64Lanes;
-use crate::sampling::{sample_cdf, uniform_cone, uniform_triangle};
+use crate::sampling::{one_minus_cos_asin, sample_cdf, uniform_cone, uniform_triangle};
 use crate::shape::{intersect_sphere, Sphere};
 use crate::Rgb;
 
@@ -599,8 +599,7 @@ impl Light {
                 if d2 <= r2 * 1.0001 {
                     return 0.0;
                 }
-                let cos_max = (1.0 - r2 / d2).max(0.0).sqrt();
-                1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12))
+                1.0 / (2.0 * PI * one_minus_cos_asin(r2 / d2).max(f32::MIN_POSITIVE))
             }
             AreaShape::Rectangle { corner, ex, ey, normal, area } => {
                 let d = q - p;
@@ -678,14 +677,14 @@ impl AreaLight {
                 // Uniform over the cone of directions the sphere subtends (solid-angle sampling).
                 let d = d2.sqrt();
                 let axis = to_c / d;
-                let cos_max = (1.0 - r2 / d2).max(0.0).sqrt();
-                let local = uniform_cone(u, cos_max);
+                let one_minus_cos_max = one_minus_cos_asin(r2 / d2).max(f32::MIN_POSITIVE);
+                let local = uniform_cone(u, one_minus_cos_max);
                 let (s1, s2) = orthonormal_basis(axis);
                 let wi = (s1 * local.x + s2 * local.y + axis * local.z).normalize();
                 let t = intersect_sphere(s, p, wi, f32::INFINITY).unwrap_or(d * local.z);
                 let q = p + wi * t;
                 let n = (q - s.center).normalize();
-                let pdf = 1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12));
+                let pdf = 1.0 / (2.0 * PI * one_minus_cos_max);
                 Some(LightSample::new(wi, q, n, false, self.emission / pdf, pdf))
             }
             AreaShape::Rectangle { corner, ex, ey, normal, area } => {
@@ -842,6 +841,32 @@ mod tests {
         let e = irradiance(&l, 200_000);
         let exact = PI * (r / d).powi(2);
         assert!((e - exact).abs() < 0.01 * exact, "{e} vs {exact}");
+    }
+
+    /// Small and distant spheres (the sun from the earth is r / d = 0.005) keep their irradiance,
+    /// their density and their sample points: the cone's size is worked out without the
+    /// cancellation of `1 − cos θmax`. With `1 − sqrt(1 − r²/d²)`, r / d = 0.001 is 7 % off
+    /// and 10⁻⁴ rounds to a cone of nothing.
+    #[test]
+    fn small_distant_sphere_lights_keep_their_irradiance() {
+        for rd in [0.005f32, 1e-3, 1e-4, 1e-5] {
+            let (r, d) = (rd * 1000.0, 1000.0f32);
+            let center = Vec3::new(0.0, 0.0, d);
+            let l = Light::Area(AreaLight {
+                object: 0,
+                emission: Rgb::ONE,
+                samples: 1,
+                shape: AreaShape::Sphere(Sphere { center, radius: r }),
+            });
+            let e = irradiance(&l, 10_000) as f64;
+            let exact = std::f64::consts::PI * (rd as f64).powi(2);
+            assert!((e - exact).abs() < 1e-4 * exact, "r/d {rd}: {e} vs {exact}");
+            let s = l.sample(Vec3::ZERO, Vec2::new(0.7, 0.2)).unwrap();
+            let want_pdf = 1.0 / (2.0 * std::f64::consts::PI * (1.0 - (1.0 - (rd as f64).powi(2)).sqrt()));
+            assert!((s.pdf as f64 - want_pdf).abs() < 1e-4 * want_pdf, "r/d {rd}: pdf {} vs {want_pdf}", s.pdf);
+            assert_eq!(l.pdf(Vec3::ZERO, s.p.into(), s.n.into()), s.pdf);
+            assert!(((Vec3::from(s.p) - center).length() - r).abs() < 1e-3 * r, "r/d {rd}: {} off the sphere", s.p);
+        }
     }
 
     #[test]

@@ -515,12 +515,27 @@ pub fn concentric_disk(u: Vec2) -> Vec2 {
     }
 }
 
-/// Direction uniform within the cone of half-angle `acos(cos_max)` about +z; pdf `1/(2π(1-cos_max))`.
-pub fn uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
-    let cos_t = (1.0 - u.x) + u.x * cos_max;
-    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+/// Direction uniform within the cone about +z of half-angle θmax, given as `1 − cos θmax`; pdf
+/// `1 / (2π (1 − cos θmax))`. The cone's size is taken as `1 − cos θmax`, and each direction's
+/// sine from `1 − cos θ`, so that a narrow cone (a small or distant sphere light, where
+/// `cos θmax` rounds to within a few units of 1) keeps its size and shape: see
+/// [`one_minus_cos_asin`].
+pub fn uniform_cone(u: Vec2, one_minus_cos_max: f32) -> Vec3 {
+    let one_minus_cos_t = u.x * one_minus_cos_max;
+    let cos_t = 1.0 - one_minus_cos_t;
+    let sin_t = (one_minus_cos_t * (2.0 - one_minus_cos_t)).max(0.0).sqrt();
     let (cos_p, sin_p) = cos_sin_turn(u.y);
     Vec3::new(cos_p * sin_t, sin_p * sin_t, cos_t)
+}
+
+/// `1 − cos θ` for the angle θ whose sine squared is `sin2` (in [0, 1]), without the
+/// cancellation of `1 − sqrt(1 − sin2)`: `sin2 / (1 + sqrt(1 − sin2))`. A sphere of radius r
+/// seen from distance d subtends the cone `sin² θmax = r² / d²`; in f32 the difference form is
+/// off by 0.14 % for r / d = 0.005 (the sun from the earth), 7 % for 0.001, and 0 below
+/// 1.7·10⁻⁴, where this keeps full precision.
+#[inline]
+pub fn one_minus_cos_asin(sin2: f32) -> f32 {
+    sin2 / (1.0 + (1.0 - sin2).max(0.0).sqrt())
 }
 
 /// Barycentrics `(b1, b2)` uniform over a triangle (area preserving square-root map).
