@@ -675,17 +675,19 @@ impl Ctx {
             "plastic" | "roughplastic" => {
                 let (distribution, roughness) =
                     if kind == "roughplastic" { self.distribution(b)? } else { (Distribution::Beckmann, 0.0) };
-                if self.boolean(b, "nonlinear", false)? {
-                    self.warn(b, "'nonlinear' plastic is rendered as linear");
-                }
+                let nonlinear = self.boolean(b, "nonlinear", false)?;
                 let ior = self.ior(b, "int_ior", 1.49)? / self.ior(b, "ext_ior", 1.000277)?;
-                Material::plastic(
+                let mut m = Material::plastic(
                     self.texture(b, "diffuse_reflectance", Rgb::splat(0.5))?,
                     self.color(b, "specular_reflectance", Rgb::ONE)?,
                     ior,
                     roughness,
                     distribution,
-                )
+                );
+                if let Material::Plastic { coat, .. } = &mut m {
+                    coat.nonlinear = nonlinear;
+                }
+                m
             }
             "twosided" => match self.nested_material(b)? {
                 Some(m) => m.surface().clone(),

@@ -122,17 +122,20 @@ fn bsdfs_map_to_materials() {
                <string name="distribution" value="ggx"/><float name="alpha" value="0.2"/></bsdf></shape>
            <shape type="sphere"><bsdf type="twosided"><bsdf type="conductor"/></bsdf></shape>
            <shape type="sphere"><bsdf type="thindielectric"/></shape>
-           <shape type="sphere"><ref id="rp"/></shape>"#,
+           <shape type="sphere"><ref id="rp"/></shape>
+           <shape type="sphere"><bsdf type="plastic"><boolean name="nonlinear" value="true"/></bsdf></shape>"#,
     )
     .unwrap();
     let mat = |i: usize| l.scene.materials[l.scene.objects[i].material].surface();
     match mat(0) {
-        Material::Plastic { ior, roughness, distribution, .. } => {
+        Material::Plastic { ior, roughness, distribution, coat, .. } => {
             assert!((ior - 2.0 / 1.000277).abs() < 1e-5);
             assert_eq!((*roughness, *distribution), (0.05, Distribution::Beckmann));
+            assert!(!coat.nonlinear);
         }
         m => panic!("{m:?}"),
     }
+    assert!(matches!(mat(6), Material::Plastic { coat, .. } if coat.nonlinear), "{:?}", mat(6));
     match mat(1) {
         Material::Dielectric { ior, roughness, .. } => {
             assert!((ior - 1.5046 / 1.000277).abs() < 1e-5 && *roughness == 0.0)

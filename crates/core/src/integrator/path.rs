@@ -376,12 +376,18 @@ impl Path {
         if let Some((li, p_choose, ls)) = &draws.light {
             let ls_wi = Vec3::from(ls.wi);
             let wi = frame.to_local(ls_wi);
-            let f = if light_reaches(ng, wo_world, ls_wi, wo, wi) { bsdf.eval(wo, wi) } else { Rgb::ZERO };
+            // The BSDF's density is needed for MIS wherever the light's is not a delta: then
+            // both come from one evaluation.
+            let (f, pdf) = match light_reaches(ng, wo_world, ls_wi, wo, wi) {
+                false => (Rgb::ZERO, 0.0),
+                true if ls.pdf > 0.0 => bsdf.eval_and_pdf(wo, wi),
+                true => (bsdf.eval(wo, wi), 0.0),
+            };
             if f.max_element() > 0.0 && ls.value.max_element() > 0.0 {
                 stats.shadow += 1;
                 let blocked = world.shadowed(hit, ng, *li, ls);
                 if !blocked {
-                    let w = light_weight(ls.pdf, *p_choose, || bsdf.pdf(wo, wi));
+                    let w = light_weight(ls.pdf, *p_choose, || pdf);
                     st.l += st.beta * Vec3A::from(f) * ls.value * (w / p_choose);
                 }
             }

@@ -114,15 +114,21 @@ impl Microfacet {
     /// Density (solid angle of `m`) with which [`Self::sample`] returns `m` for `wo`.
     #[inline]
     pub fn pdf(&self, wo: Vec3, m: Vec3) -> f32 {
+        self.pdf_with_d(wo, m, self.d(m))
+    }
+
+    /// [`Self::pdf`] given `d` = [`Self::d`]`(m)`, for callers that have it already.
+    #[inline]
+    pub fn pdf_with_d(&self, wo: Vec3, m: Vec3, d: f32) -> f32 {
         match self.kind {
             Distribution::Ggx => {
                 let wo = if wo.z < 0.0 { -wo } else { wo };
                 if wo.z == 0.0 {
                     return 0.0;
                 }
-                self.g1(wo, m) * wo.dot(m).max(0.0) * self.d(m) / wo.z
+                self.g1(wo, m) * wo.dot(m).max(0.0) * d / wo.z
             }
-            Distribution::Beckmann => self.d(m) * m.z.max(0.0),
+            Distribution::Beckmann => d * m.z.max(0.0),
         }
     }
 }
