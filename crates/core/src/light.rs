@@ -594,12 +594,7 @@ impl Light {
         let Light::Area(a) = self else { return 0.0 };
         match &a.shape {
             AreaShape::Sphere(s) => {
-                let d2 = (s.center - p).length_squared();
-                let r2 = s.radius * s.radius;
-                if d2 <= r2 * 1.0001 {
-                    return 0.0;
-                }
-                1.0 / (2.0 * PI * one_minus_cos_asin(r2 / d2).max(f32::MIN_POSITIVE))
+                sphere_cone(s, p).map_or(0.0, |(_, _, one_minus_cos_max)| 1.0 / (2.0 * PI * one_minus_cos_max))
             }
             AreaShape::Rectangle { corner, ex, ey, normal, area } => {
                 let d = q - p;
@@ -654,6 +649,21 @@ fn smoothstep(a: f32, b: f32, x: f32) -> f32 {
     t * t * (3.0 - 2.0 * t)
 }
 
+/// The cone of directions sphere `s` subtends from `p`: the vector to its centre, that
+/// vector's squared length, and `1 − cos θmax` (by [`one_minus_cos_asin`], at least the
+/// smallest normal float). `None` from inside or on the sphere, which cannot light `p` from
+/// outside. What [`AreaLight::sample`] samples and [`Light::pdf`] gives the density of.
+#[inline(always)]
+fn sphere_cone(s: &Sphere, p: Vec3) -> Option<(Vec3, f32, f32)> {
+    let to_c = s.center - p;
+    let d2 = to_c.length_squared();
+    let r2 = s.radius * s.radius;
+    if d2 <= r2 * 1.0001 {
+        return None; // (A NaN distance goes on, as it did.)
+    }
+    Some((to_c, d2, one_minus_cos_asin(r2 / d2).max(f32::MIN_POSITIVE)))
+}
+
 impl AreaLight {
     /// Total emitting area (world space).
     pub fn area(&self) -> f32 {
@@ -668,16 +678,10 @@ impl AreaLight {
     fn sample(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
         match &self.shape {
             AreaShape::Sphere(s) => {
-                let to_c = s.center - p;
-                let d2 = to_c.length_squared();
-                let r2 = s.radius * s.radius;
-                if d2 <= r2 * 1.0001 {
-                    return None; // Inside (or on) the emitter: it cannot light p from outside.
-                }
+                let (to_c, d2, one_minus_cos_max) = sphere_cone(s, p)?;
                 // Uniform over the cone of directions the sphere subtends (solid-angle sampling).
                 let d = d2.sqrt();
                 let axis = to_c / d;
-                let one_minus_cos_max = one_minus_cos_asin(r2 / d2).max(f32::MIN_POSITIVE);
                 let local = uniform_cone(u, one_minus_cos_max);
                 let (s1, s2) = orthonormal_basis(axis);
                 let wi = (s1 * local.x + s2 * local.y + axis * local.z).normalize();
