@@ -32,6 +32,40 @@ impl Image {
     }
 }
 
+/// Why pixels cannot make a texture or an environment map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BadPixels {
+    /// No pixels, or not `width · height` of them.
+    Size,
+    /// The first pixel (in reading order, `(x, y)` from the top left) with a negative or
+    /// non-finite channel.
+    Value { x: usize, y: usize },
+}
+
+impl std::fmt::Display for BadPixels {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BadPixels::Size => write!(f, "the image has no pixels"),
+            BadPixels::Value { x, y } => {
+                write!(f, "pixel ({x}, {y}) (from the top left) is negative or not finite")
+            }
+        }
+    }
+}
+
+/// Checks that `pixels` are `width × height` (at least one) light or reflectance values: every
+/// channel finite and not negative. (Such a value rendered black or poisoned its samples
+/// without a word; a damaged or wrongly exported image should say so.)
+pub fn check_pixels(width: usize, height: usize, pixels: &[Rgb]) -> Result<(), BadPixels> {
+    if width == 0 || height == 0 || pixels.len() != width * height {
+        return Err(BadPixels::Size);
+    }
+    match pixels.iter().position(|p| !p.is_finite() || p.min_element() < 0.0) {
+        Some(i) => Err(BadPixels::Value { x: i % width, y: i / width }),
+        None => Ok(()),
+    }
+}
+
 /// Linear → sRGB transfer function, clamped to `[0, 1]`; NaN maps to 0.
 pub fn srgb_encode(c: f32) -> f32 {
     let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
@@ -62,5 +96,23 @@ mod tests {
         }
         assert!((srgb_encode(7.0) - 1.0).abs() < 1e-6);
         assert_eq!(srgb_encode(f32::NAN), 0.0);
+    }
+
+    #[test]
+    fn check_pixels_finds_the_first_bad_value_in_reading_order() {
+        let mut px = vec![Rgb::splat(0.5); 12];
+        assert_eq!(check_pixels(4, 3, &px), Ok(()));
+        assert_eq!(check_pixels(4, 2, &px), Err(BadPixels::Size));
+        assert_eq!(check_pixels(0, 0, &[]), Err(BadPixels::Size));
+        // Zero and negative zero are light values; tiny and huge finite ones too.
+        px[1] = Rgb::new(0.0, -0.0, 1e-30);
+        px[2] = Rgb::splat(3e38);
+        assert_eq!(check_pixels(4, 3, &px), Ok(()));
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -1e-7] {
+            let mut p = px.clone();
+            p[9] = Rgb::new(0.5, 0.5, bad);
+            p[11] = Rgb::splat(bad);
+            assert_eq!(check_pixels(4, 3, &p), Err(BadPixels::Value { x: 1, y: 2 }), "{bad}");
+        }
     }
 }

@@ -61,14 +61,10 @@ struct Texel {
 }
 
 impl EnvMap {
-    /// `None` if the size does not match the pixels or a value is negative or not finite.
-    pub fn new(width: usize, height: usize, pixels: Vec<Rgb>) -> Option<EnvMap> {
-        if width == 0 || height == 0 || pixels.len() != width * height {
-            return None;
-        }
-        if pixels.iter().any(|p| !p.is_finite() || p.min_element() < 0.0) {
-            return None;
-        }
+    /// An error if the size does not match the pixels or a value is negative or not finite
+    /// (see [`check_pixels`](crate::image::check_pixels)).
+    pub fn new(width: usize, height: usize, pixels: Vec<Rgb>) -> Result<EnvMap, crate::image::BadPixels> {
+        crate::image::check_pixels(width, height, &pixels)?;
         let weights: Vec<f32> = pixels
             .iter()
             .enumerate()
@@ -86,7 +82,7 @@ impl EnvMap {
                 pdf: distribution.as_ref().map_or(0.0, |d| d.cell_pdf(i % width, i / width)),
             })
             .collect();
-        Some(EnvMap { width, height, texels, distribution })
+        Ok(EnvMap { width, height, texels, distribution })
     }
 
     /// The mean radiance over the pixels.
@@ -1211,7 +1207,7 @@ mod tests {
         let mut pixels = vec![Rgb::ZERO; 8 * 4];
         pixels[0] = Rgb::new(1.0, 0.0, 0.0); // top left
         pixels[3 * 8 + 4] = Rgb::new(0.0, 1.0, 0.0); // bottom row, middle
-        let e = Environment { scale: Rgb::ONE, map: EnvMap::new(8, 4, pixels), to_world: glam::Mat3::IDENTITY };
+        let e = Environment { scale: Rgb::ONE, map: EnvMap::new(8, 4, pixels).ok(), to_world: glam::Mat3::IDENTITY };
         let up_and_towards_minus_z = Vec3::new(0.01, 0.9, -0.3).normalize();
         assert_eq!(e.eval(up_and_towards_minus_z), Rgb::new(1.0, 0.0, 0.0));
         let down_and_towards_plus_z = Vec3::new(-0.01, -0.9, 0.3).normalize();

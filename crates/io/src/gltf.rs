@@ -222,8 +222,7 @@ impl<'a> Ctx<'a> {
             })
             .collect();
         let img = Arc::new(
-            ImageTexture::new(w, h, pixels)
-                .ok_or_else(|| Error::new(self.path, format!("images[{index}] is empty")))?,
+            ImageTexture::new(w, h, pixels).map_err(|e| Error::new(self.path, format!("images[{index}]: {e}")))?,
         );
         self.image_of.insert(index, img.clone());
         Ok(img)
@@ -257,7 +256,7 @@ impl<'a> Ctx<'a> {
                 let img = self.texture(&info, true, &what)?;
                 let pixels = img.pixels.iter().map(|&c| c * factor).collect();
                 let img = ImageTexture::new(img.width, img.height, pixels)
-                    .ok_or_else(|| Error::new(self.path, format!("{what}: empty base colour texture")))?;
+                    .map_err(|e| Error::new(self.path, format!("{what}: base colour texture: {e}")))?;
                 Texture::Image { image: Arc::new(img), scale: Vec2::ONE }
             }
             None => Texture::Constant(factor),

@@ -400,7 +400,7 @@ impl Ctx {
                 let path = self.resolve(p, f)?;
                 let img = crate::image_in::read_rgb(&path)?;
                 let image = material::ImageTexture::new(img.width, img.height, img.pixels)
-                    .ok_or_else(|| self.files.err(p, "the bitmap is empty"))?;
+                    .map_err(|e| self.files.err(p, format!("bitmap '{f}': {e}")))?;
                 let mut scale = Vec2::ONE;
                 if let Some(t) = p.prop("to_uv") {
                     let m = self.transform(t)?;
@@ -870,7 +870,7 @@ impl Ctx {
                     let path = self.resolve(e, f)?;
                     let img = crate::image_in::read_rgb(&path)?;
                     let map = EnvMap::new(img.width, img.height, img.pixels)
-                        .ok_or_else(|| self.files.err(e, "the environment image has negative or non-finite values"))?;
+                        .map_err(|bad| self.files.err(e, format!("envmap '{f}': {bad}")))?;
                     (Rgb::splat(self.float(e, "scale", 1.0)?), Some(map))
                 };
                 self.lights.push(Light::Environment(Environment { scale, map, to_world }));

@@ -110,7 +110,7 @@ pub fn read(path: &Path) -> Result<(Vec<MtlMaterial>, Vec<String>), Error> {
                 let img = crate::image_in::read_rgb(&dir.join(f))
                     .map_err(|e| Error::at(path, Location::Line(*line), format!("map_Kd '{f}': {}", e)))?;
                 let image = ImageTexture::new(img.width, img.height, img.pixels)
-                    .ok_or_else(|| Error::at(path, Location::Line(*line), "empty texture"))?;
+                    .map_err(|e| Error::at(path, Location::Line(*line), format!("map_Kd '{f}': {e}")))?;
                 Texture::Image { image: std::sync::Arc::new(image), scale: Vec2::ONE }
             }
         };

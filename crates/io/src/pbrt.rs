@@ -620,7 +620,7 @@ impl Ctx {
                     | (Texture::Constant(b), Texture::Image { image, scale }) => {
                         let pixels = image.pixels.iter().map(|&c| c * b).collect();
                         let image = ImageTexture::new(image.width, image.height, pixels)
-                            .ok_or_else(|| self.files.err(at, "the scaled image is empty"))?;
+                            .map_err(|e| self.files.err(at, format!("the scaled image: {e}")))?;
                         Texture::Image { image: std::sync::Arc::new(image), scale }
                     }
                     (t, _) => {
@@ -669,7 +669,7 @@ impl Ctx {
                     }
                 }
                 let image = ImageTexture::new(img.width, img.height, pixels)
-                    .ok_or_else(|| self.files.err(at, "the image is empty"))?;
+                    .map_err(|e| self.files.err(at, format!("imagemap '{f}': {e}")))?;
                 let uv = Vec2::new(self.float(p, "uscale", 1.0)?, self.float(p, "vscale", 1.0)?);
                 Texture::Image { image: std::sync::Arc::new(image), scale: uv }
             }
@@ -923,8 +923,7 @@ impl Ctx {
                             "pbrt's infinite light needs a square image in the equal-area octahedral mapping",
                         ));
                     }
-                    let map = equal_area_to_latlong(&img)
-                        .ok_or_else(|| Error::new(&path, "the image has negative or non-finite values"))?;
+                    let map = equal_area_to_latlong(&img).map_err(|e| Error::new(&path, e.to_string()))?;
                     Environment { scale: Rgb::splat(scale), map: Some(map), to_world }
                 } else {
                     let l = self.color(p, "L", emission)?.unwrap_or(Rgb::ONE);
@@ -988,8 +987,10 @@ fn equal_area_square(d: Vec3) -> Vec2 {
 }
 
 /// Resamples a square equal-area image (pbrt's environment maps, `+z` up) into the
-/// latitude-longitude image Snell samples, in the same frame, at twice the width.
-fn equal_area_to_latlong(img: &crate::image_in::RgbImage) -> Option<EnvMap> {
+/// latitude-longitude image Snell samples, in the same frame, at twice the width. Its pixels
+/// are checked as given (a bad one is reported where it is in the file).
+fn equal_area_to_latlong(img: &crate::image_in::RgbImage) -> Result<EnvMap, snell_core::image::BadPixels> {
+    snell_core::image::check_pixels(img.width, img.height, &img.pixels)?;
     let n = img.width;
     let (w, h) = (2 * n, n);
     let at = |x: i64, y: i64| img.pixels[(y.clamp(0, n as i64 - 1) as usize) * n + x.clamp(0, n as i64 - 1) as usize];

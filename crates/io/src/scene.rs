@@ -626,7 +626,7 @@ fn material_def(cx: &Ctx, def: &Spanned<MaterialDef>) -> Result<Material, Error>
                     let p = cx.path.parent().unwrap_or(Path::new(".")).join(file);
                     let img = crate::image_in::read_rgb(&p)?;
                     let image = material::ImageTexture::new(img.width, img.height, img.pixels)
-                        .ok_or_else(|| cx.err(t.span(), "the texture image is empty"))?;
+                        .map_err(|e| cx.err(t.span(), format!("texture '{file}': {e}")))?;
                     Ok(material::Texture::Image { image: std::sync::Arc::new(image), scale: glam::Vec2::splat(*scale) })
                 }
             },
@@ -796,17 +796,17 @@ fn light_def(cx: &Ctx, def: &Spanned<LightDef>) -> Result<Light, Error> {
             cx.reject(&l.irradiance, "irradiance", &what)?;
             cx.reject(&l.cone_angle, "cone_angle", &what)?;
             cx.reject(&l.falloff_start, "falloff_start", &what)?;
-            let map =
-                match &l.file {
-                    None => None,
-                    Some(f) => {
-                        let p = cx.path.parent().unwrap_or(Path::new(".")).join(f.get_ref());
-                        let img = crate::image_in::read_rgb(&p)?;
-                        Some(EnvMap::new(img.width, img.height, img.pixels).ok_or_else(|| {
-                            cx.err(f.span(), "the environment image has negative or non-finite values")
-                        })?)
-                    }
-                };
+            let map = match &l.file {
+                None => None,
+                Some(f) => {
+                    let p = cx.path.parent().unwrap_or(Path::new(".")).join(f.get_ref());
+                    let img = crate::image_in::read_rgb(&p)?;
+                    Some(
+                        EnvMap::new(img.width, img.height, img.pixels)
+                            .map_err(|e| cx.err(f.span(), format!("environment image '{}': {e}", f.get_ref())))?,
+                    )
+                }
+            };
             let angle = cx.num(&l.rotate_y, -360.0, 360.0, "rotate_y", 0.0)?;
             Ok(Light::Environment(Environment {
                 scale: val(&l.radiance).map_or(Rgb::ONE, |c| c.0),

@@ -273,3 +273,93 @@ fn truncated_and_damaged_scene_files_never_panic() {
         }
     }
 }
+
+/// Damaged images in each format Snell reads (textures, environment maps and `snell diff`'s
+/// inputs all go through `read_rgb`): every prefix (cut every few bytes) and copies with bytes
+/// overwritten, half of them within the header, decode or fail with an error naming the file,
+/// never a panic.
+#[test]
+fn damaged_images_never_panic() {
+    use image::{DynamicImage, ImageFormat, Rgb32FImage};
+    let dir = tempfile::tempdir().unwrap();
+    // 16 wide, so that the Radiance file's rows are run-length encoded.
+    let img = Rgb32FImage::from_fn(16, 8, |x, y| image::Rgb([x as f32 / 4.0, y as f32 / 2.0, 0.25]));
+    let encode = |f: ImageFormat| {
+        let d = DynamicImage::ImageRgb32F(img.clone());
+        let d = if f == ImageFormat::Png { DynamicImage::ImageRgb8(d.to_rgb8()) } else { d };
+        let mut out = std::io::Cursor::new(Vec::new());
+        d.write_to(&mut out, f).unwrap();
+        out.into_inner()
+    };
+    let rows: Vec<[f32; 3]> = img.pixels().map(|p| p.0).collect();
+    let files = [
+        ("t.png", encode(ImageFormat::Png)),
+        ("t.exr", encode(ImageFormat::OpenExr)),
+        ("t.hdr", encode(ImageFormat::Hdr)),
+        ("t.pfm", crate::common::pfm(16, 8, &rows)),
+    ];
+    let mut rng = snell_core::sampling::Pcg32::new(64, 65);
+    for (name, bytes) in files {
+        let p = dir.path().join(name);
+        let read = |b: &[u8]| -> bool {
+            std::fs::write(&p, b).unwrap();
+            match std::panic::catch_unwind(|| snell_io::image_in::read_rgb(&p).map(|_| ()).map_err(|e| e.to_string())) {
+                Ok(Ok(())) => true,
+                Ok(Err(e)) => {
+                    assert!(e.contains(name), "{e}");
+                    false
+                }
+                Err(_) => panic!("{name}: a damaged image made the reader panic"),
+            }
+        };
+        assert!(read(&bytes), "the undamaged {name} does not decode");
+        let mut refused = 0;
+        for cut in (0..bytes.len()).step_by((bytes.len() / 100).max(1)) {
+            refused += !read(&bytes[..cut]) as u32;
+        }
+        for k in 0..200 {
+            let mut b = bytes.clone();
+            for _ in 0..1 + rng.next_u32() % 4 {
+                let span = if k % 2 == 0 { b.len().min(64) } else { b.len() };
+                b[rng.next_u32() as usize % span] = rng.next_u32() as u8;
+            }
+            refused += !read(&b) as u32;
+        }
+        // Most prefixes lack pixels: the damage was seen, not just survived.
+        assert!(refused >= 90, "{name}: only {refused} of the damaged copies were refused");
+    }
+}
+
+/// A texture or environment image with a negative or non-finite value is refused, naming the
+/// scene's line, the image and the first such pixel (from the top left), whichever reader
+/// loads it. (Such texels rendered black, or made every sample that met them count as black,
+/// without a word.)
+#[test]
+fn images_with_negative_or_non_finite_values_name_the_pixel() {
+    let mut rows = vec![[0.5f32; 3]; 8];
+    rows[4 + 2] = [0.5, f32::NAN, 0.5];
+    rows[4 + 3] = [-0.25, 0.5, 0.5];
+    let bad = crate::common::pfm(4, 2, &rows);
+    let texture =
+        format!("{GOOD_HEAD}material = \"m\"\n\n[materials.m]\ntype = \"diffuse\"\nalbedo = {{ image = \"t.pfm\" }}\n");
+    fails(&[("s.toml", texture.as_bytes()), ("t.pfm", &bad)], "s.toml", &[], &["s.toml:10:", "t.pfm", "pixel (2, 1)"]);
+    let env = format!("{GOOD_HEAD}\n[[lights]]\ntype = \"environment\"\nfile = \"e.pfm\"\n");
+    fails(&[("s.toml", env.as_bytes()), ("e.pfm", &bad)], "s.toml", &[], &["s.toml:9:", "e.pfm", "pixel (2, 1)"]);
+    let xml = b"<scene version=\"3.0.0\">\n<shape type=\"sphere\">\n<bsdf type=\"diffuse\">\n\
+        <texture type=\"bitmap\" name=\"reflectance\"><string name=\"filename\" value=\"t.pfm\"/></texture>\n\
+        </bsdf>\n</shape>\n</scene>\n";
+    fails(&[("s.xml", xml), ("t.pfm", &bad)], "s.xml", &[], &["s.xml:4:", "t.pfm", "pixel (2, 1)"]);
+    let xml = b"<scene version=\"3.0.0\">\n<shape type=\"sphere\"/>\n\
+        <emitter type=\"envmap\"><string name=\"filename\" value=\"e.pfm\"/></emitter>\n</scene>\n";
+    fails(&[("s.xml", xml), ("e.pfm", &bad)], "s.xml", &[], &["s.xml:3:", "e.pfm", "pixel (2, 1)"]);
+    let pbrt = b"WorldBegin\nTexture \"t\" \"spectrum\" \"imagemap\" \"string filename\" \"t.pfm\"\n\
+        Material \"diffuse\" \"texture reflectance\" \"t\"\nShape \"sphere\"\n";
+    fails(&[("s.pbrt", pbrt), ("t.pfm", &bad)], "s.pbrt", &[], &["s.pbrt:2:", "t.pfm", "pixel (2, 1)"]);
+    // Only the values are at fault: the same image without them renders.
+    let dir = tempfile::tempdir().unwrap();
+    let good = crate::common::pfm(4, 2, &[[0.5f32; 3]; 8]);
+    std::fs::write(dir.path().join("s.toml"), &texture).unwrap();
+    std::fs::write(dir.path().join("t.pfm"), good).unwrap();
+    let o = run(&["render", "s.toml", "-o", "out.png", "--width", "8", "--height", "8", "--spp", "1"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+}

@@ -29,6 +29,19 @@ pub fn shared_scene(rel: &str) -> Option<PathBuf> {
     Some(p)
 }
 
+/// A little-endian colour PFM, rows given top first (the file stores them bottom up).
+pub fn pfm(w: usize, h: usize, rows_top_first: &[[f32; 3]]) -> Vec<u8> {
+    let mut v = format!("PF\n{w} {h}\n-1.0\n").into_bytes();
+    for y in (0..h).rev() {
+        for x in 0..w {
+            for c in rows_top_first[y * w + x] {
+                v.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+    }
+    v
+}
+
 /// Path of a file in `crates/cli/tests/data`.
 pub fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)

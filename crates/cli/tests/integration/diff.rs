@@ -1,19 +1,6 @@
 //! `snell diff`: the numbers against hand computation, the formats, and bad input.
 
-use crate::common::{run, stderr};
-
-/// A little-endian colour PFM, rows given top first (the file stores them bottom up).
-fn pfm(w: usize, h: usize, rows_top_first: &[[f32; 3]]) -> Vec<u8> {
-    let mut v = format!("PF\n{w} {h}\n-1.0\n").into_bytes();
-    for y in (0..h).rev() {
-        for x in 0..w {
-            for c in rows_top_first[y * w + x] {
-                v.extend_from_slice(&c.to_le_bytes());
-            }
-        }
-    }
-    v
-}
+use crate::common::{pfm, run, stderr};
 
 fn json_field(s: &str, key: &str) -> f64 {
     let i = s.find(&format!("\"{key}\":")).unwrap_or_else(|| panic!("{key} missing in {s}")) + key.len() + 3;

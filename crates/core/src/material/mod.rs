@@ -44,9 +44,11 @@ pub struct ImageTexture {
 }
 
 impl ImageTexture {
-    /// `None` unless there are `width · height ≥ 1` pixels.
-    pub fn new(width: usize, height: usize, pixels: Vec<Rgb>) -> Option<ImageTexture> {
-        (width > 0 && height > 0 && pixels.len() == width * height).then_some(ImageTexture { width, height, pixels })
+    /// `width · height ≥ 1` pixels, each channel finite and not negative (see
+    /// [`check_pixels`](crate::image::check_pixels)).
+    pub fn new(width: usize, height: usize, pixels: Vec<Rgb>) -> Result<ImageTexture, crate::image::BadPixels> {
+        crate::image::check_pixels(width, height, &pixels)?;
+        Ok(ImageTexture { width, height, pixels })
     }
 
     pub fn eval(&self, uv: Vec2) -> Rgb {
