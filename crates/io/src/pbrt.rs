@@ -648,7 +648,15 @@ impl Ctx {
                 let f = self.string(p, "filename")?.ok_or_else(|| self.files.err(at, "imagemap needs 'filename'"))?;
                 let path = self.path(at, f);
                 let img = crate::image_in::read_rgb(&path)?;
+                // The file's own values first (`invert` would clamp a NaN away), where its
+                // pixels are; then `scale`, which must keep them light values.
+                snell_core::image::check_pixels(img.width, img.height, &img.pixels)
+                    .map_err(|e| self.files.err(at, format!("imagemap '{f}': {e}")))?;
                 let scale = self.float(p, "scale", 1.0)?;
+                if scale < 0.0 {
+                    let at = p.get("scale").map_or(at, |q| q.at);
+                    return Err(self.files.err(at, "'scale' must not be negative"));
+                }
                 let invert = self.boolean(p, "invert", false)?;
                 let pixels = img
                     .pixels

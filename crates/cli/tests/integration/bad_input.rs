@@ -352,12 +352,25 @@ fn images_with_negative_or_non_finite_values_name_the_pixel() {
     let xml = b"<scene version=\"3.0.0\">\n<shape type=\"sphere\"/>\n\
         <emitter type=\"envmap\"><string name=\"filename\" value=\"e.pfm\"/></emitter>\n</scene>\n";
     fails(&[("s.xml", xml), ("e.pfm", &bad)], "s.xml", &[], &["s.xml:3:", "e.pfm", "pixel (2, 1)"]);
-    let pbrt = b"WorldBegin\nTexture \"t\" \"spectrum\" \"imagemap\" \"string filename\" \"t.pfm\"\n\
-        Material \"diffuse\" \"texture reflectance\" \"t\"\nShape \"sphere\"\n";
-    fails(&[("s.pbrt", pbrt), ("t.pfm", &bad)], "s.pbrt", &[], &["s.pbrt:2:", "t.pfm", "pixel (2, 1)"]);
+    // pbrt's `invert` would clamp the NaN away: the file's values are checked first.
+    let pbrt = |params: &str| {
+        format!(
+            "WorldBegin\nTexture \"t\" \"spectrum\" \"imagemap\" \"string filename\" \"t.pfm\" {params}\n\
+             Material \"diffuse\" \"texture reflectance\" \"t\"\nShape \"sphere\"\n"
+        )
+    };
+    let inverted = pbrt("\"bool invert\" true");
+    fails(&[("s.pbrt", inverted.as_bytes()), ("t.pfm", &bad)], "s.pbrt", &[], &["s.pbrt:2:", "t.pfm", "pixel (2, 1)"]);
+    let good = crate::common::pfm(4, 2, &[[0.5f32; 3]; 8]);
+    let negative = pbrt("\"float scale\" -2");
+    fails(
+        &[("s.pbrt", negative.as_bytes()), ("t.pfm", &good)],
+        "s.pbrt",
+        &[],
+        &["s.pbrt:2:", "'scale' must not be negative"],
+    );
     // Only the values are at fault: the same image without them renders.
     let dir = tempfile::tempdir().unwrap();
-    let good = crate::common::pfm(4, 2, &[[0.5f32; 3]; 8]);
     std::fs::write(dir.path().join("s.toml"), &texture).unwrap();
     std::fs::write(dir.path().join("t.pfm"), good).unwrap();
     let o = run(&["render", "s.toml", "-o", "out.png", "--width", "8", "--height", "8", "--spp", "1"], dir.path());
