@@ -650,8 +650,9 @@ impl Ctx {
                 let img = crate::image_in::read_rgb(&path)?;
                 // The file's own values first (`invert` would clamp a NaN away), where its
                 // pixels are; then `scale`, which must keep them light values.
+                let bad = |e: snell_core::image::BadPixels| format!("imagemap '{f}': {e}");
                 snell_core::image::check_pixels(img.width, img.height, &img.pixels)
-                    .map_err(|e| self.files.err(at, format!("imagemap '{f}': {e}")))?;
+                    .map_err(|e| self.files.err(at, bad(e)))?;
                 let scale = self.float(p, "scale", 1.0)?;
                 if scale < 0.0 {
                     let at = p.get("scale").map_or(at, |q| q.at);
@@ -676,8 +677,7 @@ impl Ctx {
                         self.warn(at, format!("encoding '{e}' is ignored: 8-bit images are decoded from sRGB"));
                     }
                 }
-                let image = ImageTexture::new(img.width, img.height, pixels)
-                    .map_err(|e| self.files.err(at, format!("imagemap '{f}': {e}")))?;
+                let image = ImageTexture::new(img.width, img.height, pixels).map_err(|e| self.files.err(at, bad(e)))?;
                 let uv = Vec2::new(self.float(p, "uscale", 1.0)?, self.float(p, "vscale", 1.0)?);
                 Texture::Image { image: std::sync::Arc::new(image), scale: uv }
             }
