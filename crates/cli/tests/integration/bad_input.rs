@@ -235,6 +235,25 @@ fn bad_arrays() {
     fails(&[("s.toml", scene)], "s.toml", &[], &["s.toml:3:"]);
 }
 
+/// Writes `bytes` to `path` and loads it with `load`: whether it loaded. A refusal must name
+/// the file, and a panic fails the test.
+fn loads_or_names_the_file(
+    path: &Path,
+    bytes: &[u8],
+    load: impl FnOnce(&Path) -> Result<(), String> + std::panic::UnwindSafe,
+) -> bool {
+    std::fs::write(path, bytes).unwrap();
+    let name = path.file_name().unwrap().to_string_lossy();
+    match std::panic::catch_unwind(|| load(path)) {
+        Ok(Ok(())) => true,
+        Ok(Err(e)) => {
+            assert!(e.contains(&*name), "{e}");
+            false
+        }
+        Err(_) => panic!("{name}: a damaged file made the reader panic"),
+    }
+}
+
 /// Every prefix of the repository's pbrt and glTF Cornell boxes (cut every few bytes), and
 /// copies with bytes overwritten, load or fail with an error: never a panic.
 #[test]
@@ -244,19 +263,13 @@ fn truncated_and_damaged_scene_files_never_panic() {
         let bytes = std::fs::read(crate::common::repo_scene(name)).unwrap();
         let p = dir.path().join(name);
         let load = |b: &[u8]| {
-            std::fs::write(&p, b).unwrap();
-            let r = std::panic::catch_unwind(|| {
+            loads_or_names_the_file(&p, b, |p| {
                 if name.ends_with(".pbrt") {
-                    snell_io::pbrt::load(&p).map(|_| ()).map_err(|e| e.to_string())
+                    snell_io::pbrt::load(p).map(|_| ()).map_err(|e| e.to_string())
                 } else {
-                    snell_io::gltf::load(&p).map(|_| ()).map_err(|e| e.to_string())
+                    snell_io::gltf::load(p).map(|_| ()).map_err(|e| e.to_string())
                 }
             });
-            match r {
-                Ok(Err(e)) => assert!(e.contains(name), "{e}"),
-                Ok(Ok(())) => {}
-                Err(_) => panic!("{name}: a damaged file made the reader panic"),
-            }
         };
         let step = (bytes.len() / 150).max(1);
         for cut in (0..bytes.len()).step_by(step) {
@@ -301,16 +314,8 @@ fn damaged_images_never_panic() {
     let mut rng = snell_core::sampling::Pcg32::new(64, 65);
     for (name, bytes) in files {
         let p = dir.path().join(name);
-        let read = |b: &[u8]| -> bool {
-            std::fs::write(&p, b).unwrap();
-            match std::panic::catch_unwind(|| snell_io::image_in::read_rgb(&p).map(|_| ()).map_err(|e| e.to_string())) {
-                Ok(Ok(())) => true,
-                Ok(Err(e)) => {
-                    assert!(e.contains(name), "{e}");
-                    false
-                }
-                Err(_) => panic!("{name}: a damaged image made the reader panic"),
-            }
+        let read = |b: &[u8]| {
+            loads_or_names_the_file(&p, b, |p| snell_io::image_in::read_rgb(p).map(|_| ()).map_err(|e| e.to_string()))
         };
         assert!(read(&bytes), "the undamaged {name} does not decode");
         let mut refused = 0;
