@@ -12,8 +12,8 @@
 //! nodes, which is then collapsed into an 8-wide tree ([`WIDTH`]) whose nodes hold the boxes of
 //! their eight children in structure-of-arrays form, so that one slab test checks all eight
 //! (the AVX2 and AVX-512 walks in one instruction per plane, the portable walk in two
-//! four-wide halves). Traversal visits the children nearest first and skips stacked nodes that lie
-//! beyond the closest hit.
+//! four-wide halves). Traversal visits the children nearest first and skips stacked nodes
+//! that lie beyond the closest hit.
 
 use super::{Accel, AccelParams, AccelStats, BvhParams, Counter};
 use crate::geometry::{Aabb, Ray, EXIT_ROUNDING};
