@@ -6,7 +6,7 @@
  *
  * Workloads: "alu", eight independent chains of multiply-adds in registers; "fma-units",
  * sixteen independent chains of 256-bit fused multiply-adds, enough to keep a core's FMA units
- * busy every cycle (run only where the CPU has AVX2 and FMA): two vCPUs that were two hardware
+ * busy every cycle (run only on x86-64 CPUs with AVX2 and FMA): two vCPUs that were two hardware
  * threads of one core would share those units and give it about 1x, where "alu", waiting on
  * its chains' latency, could still give 2x; "chase-l2" and "chase-memory", a dependent walk
  * through a random cycle of pointers in a buffer of 1 MiB (within a core's L2) and 256 MiB
@@ -15,12 +15,14 @@
  *   cc -O2 -pthread -o machine_scaling bench/machine_scaling.c && ./machine_scaling [ROUNDS]
  */
 #define _GNU_SOURCE
-#include <immintrin.h>
 #include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 enum kind { ALU, FMA_UNITS, CHASE };
 
@@ -35,6 +37,13 @@ static double now(void) {
     struct timespec t;
     clock_gettime(CLOCK_MONOTONIC, &t);
     return t.tv_sec + t.tv_nsec * 1e-9;
+}
+
+#if defined(__x86_64__)
+/* Whether this CPU runs fma_units. */
+static int has_fma_units(void) {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
 }
 
 __attribute__((target("avx2,fma"))) static double fma_units(size_t steps) {
@@ -52,6 +61,10 @@ __attribute__((target("avx2,fma"))) static double fma_units(size_t steps) {
     _mm256_storeu_ps(f, s);
     return f[0];
 }
+#else
+static int has_fma_units(void) { return 0; }
+static double fma_units(size_t steps) { return (double)steps; }
+#endif
 
 static void *run(void *arg) {
     struct job *j = arg;
@@ -117,10 +130,9 @@ int main(int argc, char **argv) {
                  {"fma-units", FMA_UNITS, 0, 150000000},
                  {"chase-l2", CHASE, 1 << 20, 60000000},
                  {"chase-memory", CHASE, 256 << 20, 8000000}};
-    __builtin_cpu_init();
     for (size_t w = 0; w < sizeof loads / sizeof loads[0]; w++) {
-        if (loads[w].kind == FMA_UNITS && !(__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))) {
-            printf("   %-16s (this CPU has no AVX2 and FMA)\n", loads[w].name);
+        if (loads[w].kind == FMA_UNITS && !has_fma_units()) {
+            printf("   %-16s (not run: needs an x86-64 CPU with AVX2 and FMA)\n", loads[w].name);
             continue;
         }
         struct job jobs[2];
