@@ -256,7 +256,9 @@ impl Bsdf<'_> {
         self.eval_pdf(wo, wi).1
     }
 
-    /// [`Self::eval_pdf`], out of line (for the path tracer's light samples).
+    /// [`Self::eval_pdf`], out of line (for the path tracer's light samples): the attribute
+    /// makes it so, where the compiler's choice did before.
+    #[inline(never)]
     pub fn eval_and_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
         self.eval_pdf(wo, wi)
     }
