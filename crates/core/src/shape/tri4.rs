@@ -45,6 +45,26 @@ impl Ray4 {
     }
 }
 
+/// A hit found among blocks: the triangle, where on it, and the block and lane holding its
+/// corners, which the hit's surface point is made from ([`BlockHit::corners`]: read from the
+/// block the test has just read, rather than through the mesh's index and position arrays,
+/// two dependent loads that miss the caches on a large mesh).
+#[derive(Clone, Copy, Debug)]
+pub struct BlockHit<'a> {
+    pub tri: u32,
+    pub hit: TriHit,
+    block: &'a Tri4,
+    lane: usize,
+}
+
+impl BlockHit<'_> {
+    /// The triangle's corners, as [`Tri4::pack`] was given them.
+    #[inline(always)]
+    pub fn corners(&self) -> [Vec3; 3] {
+        self.block.corners(self.lane)
+    }
+}
+
 impl Tri4 {
     pub const NONE: u32 = u32::MAX;
 
@@ -74,6 +94,7 @@ impl Tri4 {
         self.id[0] == Tri4::NONE
     }
 
+    #[inline(always)]
     fn corners(&self, lane: usize) -> [Vec3; 3] {
         self.v.map(|p| Vec3::new(p[0][lane], p[1][lane], p[2][lane]))
     }
@@ -81,8 +102,8 @@ impl Tri4 {
     /// The scalar test, lane by lane, in lane order: the reference the SIMD path reproduces.
     #[cold]
     #[inline(never)]
-    fn closest_scalar(&self, r: &Ray4, t_max: f32) -> Option<(u32, TriHit)> {
-        let mut best: Option<(u32, TriHit)> = None;
+    fn closest_scalar(&self, r: &Ray4, t_max: f32) -> Option<(usize, TriHit)> {
+        let mut best: Option<(usize, TriHit)> = None;
         let mut tm = t_max;
         for lane in 0..4 {
             if self.id[lane] == Tri4::NONE {
@@ -91,7 +112,7 @@ impl Tri4 {
             let [a, b, c] = self.corners(lane);
             if let Some(h) = intersect_triangle(&r.ray, a, b, c, tm) {
                 tm = h.t;
-                best = Some((self.id[lane], h));
+                best = Some((lane, h));
             }
         }
         best
@@ -113,7 +134,13 @@ impl Tri4 {
     /// The closest hit with `0 < t < t_max` among the triangles of `blocks`, tested in order:
     /// `(triangle index, hit)`; the ray's constants are made ready once for all of them.
     #[inline(always)]
-    pub fn closest_in(blocks: &[Tri4], r: &Ray4, mut t_max: f32) -> Option<(u32, TriHit)> {
+    pub fn closest_in(blocks: &[Tri4], r: &Ray4, t_max: f32) -> Option<(u32, TriHit)> {
+        Tri4::closest_at(blocks, r, t_max).map(|h| (h.tri, h.hit))
+    }
+
+    /// [`Tri4::closest_in`], with the block and lane of the hit.
+    #[inline(always)]
+    pub fn closest_at<'a>(blocks: &'a [Tri4], r: &Ray4, mut t_max: f32) -> Option<BlockHit<'a>> {
         #[cfg(target_arch = "x86_64")]
         let l = &r.lanes;
         let mut rec = None;
@@ -125,18 +152,18 @@ impl Tri4 {
             let found = match block.lanes(l, t_max) {
                 Some((mask, t, inv, v, w)) => block.nearest(mask, t, inv, v, w),
                 None => {
-                    if let Some((tri, h)) = block.closest_scalar(r, t_max) {
-                        t_max = h.t;
-                        rec = Some((tri, h));
+                    if let Some((lane, hit)) = block.closest_scalar(r, t_max) {
+                        t_max = hit.t;
+                        rec = Some(BlockHit { tri: block.id[lane], hit, block, lane });
                     }
                     continue;
                 }
             };
             #[cfg(not(target_arch = "x86_64"))]
             let found = block.closest_scalar(r, t_max);
-            if let Some((tri, h)) = found {
-                t_max = h.t;
-                rec = Some((tri, h));
+            if let Some((lane, hit)) = found {
+                t_max = hit.t;
+                rec = Some(BlockHit { tri: block.id[lane], hit, block, lane });
             }
         }
         rec
@@ -156,11 +183,11 @@ impl Tri4 {
         })
     }
 
-    /// The nearest of the lanes in `mask` (the lower lane among equal distances); `inv` holds
-    /// each lane's `1 / det`, as the lane test worked it out.
+    /// The nearest of the lanes in `mask` (the lower lane among equal distances) and its hit;
+    /// `inv` holds each lane's `1 / det`, as the lane test worked it out.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    fn nearest(&self, mask: u32, t: [f32; 4], inv: [f32; 4], v: [f32; 4], w: [f32; 4]) -> Option<(u32, TriHit)> {
+    fn nearest(&self, mask: u32, t: [f32; 4], inv: [f32; 4], v: [f32; 4], w: [f32; 4]) -> Option<(usize, TriHit)> {
         if mask == 0 {
             return None;
         }
@@ -176,7 +203,7 @@ impl Tri4 {
         // The scalar test's `1.0 / det`: a lane of the SIMD quotient is the same IEEE quotient,
         // taken from there rather than divided again at the end of the query's critical path.
         let inv = inv[lane];
-        Some((self.id[lane], TriHit { t: t[lane], b1: v[lane] * inv, b2: w[lane] * inv }))
+        Some((lane, TriHit { t: t[lane], b1: v[lane] * inv, b2: w[lane] * inv }))
     }
 
     /// The four tests in SSE lanes: `(hit mask, t, 1 / det, v, w)`, or `None` when an edge function
