@@ -11,5 +11,5 @@ pub use mesh::{Mesh, MeshError, Reentry, REENTRY_MAX_CHECKS};
 pub use sphere::{intersect_sphere, Sphere};
 #[cfg(target_arch = "x86_64")]
 pub use tri4::Rays8;
-pub use tri4::{BlockHit, Ray4, Tri4};
+pub use tri4::{BlockHit, Corners, Ray4, Tri4};
 pub use triangle::{intersect_triangle, TriHit, WatertightRay};

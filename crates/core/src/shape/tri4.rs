@@ -45,22 +45,29 @@ impl Ray4 {
     }
 }
 
-/// A hit found among blocks: the triangle, where on it, and the block and lane holding its
-/// corners, which the hit's surface point is made from ([`BlockHit::corners`]: read from the
-/// block the test has just read, rather than through the mesh's index and position arrays,
-/// two dependent loads that miss the caches on a large mesh).
+/// A hit found among blocks: the triangle, where on it, and where its corners are.
 #[derive(Clone, Copy, Debug)]
 pub struct BlockHit<'a> {
     pub tri: u32,
     pub hit: TriHit,
+    pub corners: Corners<'a>,
+}
+
+/// Where a hit triangle's corners are: its block and lane. The hit's surface point is made
+/// from them ([`Corners::get`]: read from the block the test has just read, rather than
+/// through the mesh's index and position arrays, two dependent loads that miss the caches on
+/// a large mesh); kept as a reference until then, so that a query whose caller wants no
+/// surface reads nothing more.
+#[derive(Clone, Copy, Debug)]
+pub struct Corners<'a> {
     block: &'a Tri4,
     lane: usize,
 }
 
-impl BlockHit<'_> {
+impl Corners<'_> {
     /// The triangle's corners, as [`Tri4::pack`] was given them.
     #[inline(always)]
-    pub fn corners(&self) -> [Vec3; 3] {
+    pub fn get(&self) -> [Vec3; 3] {
         self.block.corners(self.lane)
     }
 }
@@ -154,7 +161,7 @@ impl Tri4 {
                 None => {
                     if let Some((lane, hit)) = block.closest_scalar(r, t_max) {
                         t_max = hit.t;
-                        rec = Some(BlockHit { tri: block.id[lane], hit, block, lane });
+                        rec = Some(BlockHit { tri: block.id[lane], hit, corners: Corners { block, lane } });
                     }
                     continue;
                 }
@@ -163,7 +170,7 @@ impl Tri4 {
             let found = block.closest_scalar(r, t_max);
             if let Some((lane, hit)) = found {
                 t_max = hit.t;
-                rec = Some(BlockHit { tri: block.id[lane], hit, block, lane });
+                rec = Some(BlockHit { tri: block.id[lane], hit, corners: Corners { block, lane } });
             }
         }
         rec
