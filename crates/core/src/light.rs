@@ -254,17 +254,17 @@ impl Environment {
         cell_pdf / (2.0 * PI * PI * sin)
     }
 
-    /// A direction towards the environment for `u` uniform in `[0, 1)²`, by its map where it
-    /// has one (uniformly over the sphere otherwise). The sample's point is left at the
-    /// origin: [`Light::sample`] puts it at `p + wi` for the shading point `p`.
+    /// [`Environment::sample_facing`] from any side (the tests' sampling).
     #[cfg(test)]
     fn sample(&self, u: Vec2) -> Option<LightSample> {
         self.sample_facing(u, None)
     }
 
-    /// [`Environment::sample`], but `None` for a direction on the other side of `side`'s
-    /// plane than the path ([`Light::sample_facing`]), before its radiance and density are
-    /// looked up.
+    /// A direction towards the environment for `u` uniform in `[0, 1)²`, by its map where it
+    /// has one (uniformly over the sphere otherwise), but `None` for a direction on the other
+    /// side of `side`'s plane than the path ([`Light::sample_facing`]), before its radiance and
+    /// density are looked up. The sample's point is left at the origin: [`Light::sample`] puts
+    /// it at `p + wi` for the shading point `p`.
     fn sample_facing(&self, u: Vec2, side: Option<(Vec3, bool)>) -> Option<LightSample> {
         let (wi, radiance, pdf) = match self.map.as_ref().and_then(|m| m.distribution.as_ref()) {
             None => {
