@@ -129,7 +129,7 @@ impl Tri4 {
     /// to the lower lane, as a test of the lanes in order would give.
     #[inline(always)]
     pub fn closest(&self, r: &Ray4, t_max: f32) -> Option<(u32, TriHit)> {
-        Tri4::closest_in(std::slice::from_ref(self), r, t_max)
+        Tri4::closest_at(std::slice::from_ref(self), r, t_max).map(|h| (h.tri, h.hit))
     }
 
     /// Whether any of the four is hit with `0 < t < t_max`.
@@ -138,14 +138,8 @@ impl Tri4 {
         Tri4::any_in(std::slice::from_ref(self), r, t_max)
     }
 
-    /// The closest hit with `0 < t < t_max` among the triangles of `blocks`, tested in order:
-    /// `(triangle index, hit)`; the ray's constants are made ready once for all of them.
-    #[inline(always)]
-    pub fn closest_in(blocks: &[Tri4], r: &Ray4, t_max: f32) -> Option<(u32, TriHit)> {
-        Tri4::closest_at(blocks, r, t_max).map(|h| (h.tri, h.hit))
-    }
-
-    /// [`Tri4::closest_in`], with the block and lane of the hit.
+    /// The closest hit with `0 < t < t_max` among the triangles of `blocks`, tested in order,
+    /// with where its corners are; the ray's constants are made ready once for all of them.
     #[inline(always)]
     pub fn closest_at<'a>(blocks: &'a [Tri4], r: &Ray4, mut t_max: f32) -> Option<BlockHit<'a>> {
         #[cfg(target_arch = "x86_64")]
