@@ -176,7 +176,7 @@ fn main() -> ExitCode {
     }
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(args) => cmd_render(args),
+        Command::Render(args) => in_pool(args.threads, || cmd_render(args)),
         Command::Bench(args) => bench::run(args),
         Command::Diff(args) => diff::run(args),
         Command::Info(args) => info::run(args),
@@ -188,6 +188,18 @@ fn main() -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// Runs `f` in a pool of `threads` workers (default: one per core), so that all a command does
+/// in parallel (loading, building the accelerator, rendering) keeps to the count asked for, as
+/// pbrt's `--nthreads` does. Without it the load and the build ran on every core whatever
+/// `--threads` said.
+fn in_pool<T: Send>(threads: Option<u32>, f: impl FnOnce() -> Result<T> + Send) -> Result<T> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.map_or(0, |n| n as usize))
+        .build()
+        .context("making the thread pool")?;
+    pool.install(f)
 }
 
 pub(crate) fn load(scene: Option<&Path>, defines: &[(String, String)]) -> Result<LoadedScene> {
@@ -323,7 +335,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     .with_context(|| format!("writing {}", args.output.display()))?;
     print_stats(&stats);
     println!(
-        "{}: {}x{} at {} spp with {} ({} triangles): load {:.2} s, build {:.3} s, render {:.3} s, {:.2} Mrays/s",
+        "{}: {}x{} at {} spp with {} ({} triangles): load {:.2} s, build {:.3} s, render {:.3} s, {:.2} Mrays/s, {} {}",
         args.output.display(),
         settings.width,
         settings.height,
@@ -333,7 +345,9 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         load_s,
         build_s,
         render_s,
-        stats.total_rays() as f64 / render_s.max(1e-9) / 1e6
+        stats.total_rays() as f64 / render_s.max(1e-9) / 1e6,
+        rayon::current_num_threads(),
+        if rayon::current_num_threads() == 1 { "thread" } else { "threads" }
     );
     Ok(())
 }

@@ -85,9 +85,16 @@ fn cli_output_is_identical_across_thread_counts() {
     let ra = image::open(dir.path().join("a.exr")).unwrap().to_rgb32f();
     let rb = image::open(dir.path().join("b.exr")).unwrap().to_rgb32f();
     assert_eq!(ra.as_raw(), rb.as_raw());
-    // The summary line reports time and throughput.
+    // The summary line reports time and throughput, and the threads the whole command (load,
+    // build and render) ran on: the pool `--threads` asked for.
     let out = String::from_utf8_lossy(&a.stdout);
     assert!(out.contains("Mrays/s") && out.contains("camera rays"), "{out}");
+    assert!(out.trim_end().ends_with("Mrays/s, 1 thread"), "{out}");
+    assert!(
+        String::from_utf8_lossy(&b.stdout).trim_end().ends_with("Mrays/s, 2 threads"),
+        "{}",
+        String::from_utf8_lossy(&b.stdout)
+    );
 }
 
 const PLANE: &str = r#"
