@@ -637,7 +637,7 @@ pub fn grid_cell(p: Vec2, width: usize, height: usize) -> (usize, usize) {
 
 /// A piecewise-constant 2D distribution over `[0, 1)²` on a `width × height` grid of
 /// non-negative weights (pbrt's `PiecewiseConstant2D`): a marginal over rows, a conditional
-/// per row, each searched through a guide table ([`cdf_guide`]). The rows' running sums lie
+/// per row, each searched through a guide table (`cdf_guide`). The rows' running sums lie
 /// in one array, row after row, as do their guides.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Distribution2D {

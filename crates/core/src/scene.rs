@@ -681,11 +681,10 @@ fn winding_normal([p0, p1, p2]: [Vec3; 3]) -> Vec3 {
     (p1 - p0).cross(p2 - p0).normalize_or_zero()
 }
 
-/// The boxes of `m`'s triangles, and their union, in one parallel pass (a second pass to
-/// unite them cost 3 ms of the dragon's build).
 /// Each triangle's box, their union, and each triangle's unit normal by its winding (zero for
-/// a degenerate triangle: [`World::interaction_into`] then falls back to the ray), in one parallel
-/// pass over the triangles.
+/// a degenerate triangle: [`World::interaction_into`] then falls back to the ray), in one
+/// parallel pass over the triangles (a second pass to unite the boxes cost 3 ms of the
+/// dragon's build).
 fn triangle_boxes(m: &Mesh) -> (Vec<Aabb>, Aabb, Vec<Vec3>) {
     use rayon::prelude::*;
     const CHUNK: usize = 4096;
@@ -1287,7 +1286,7 @@ impl<'s, A: Accel> World<'s, A> {
     }
 
     /// [`World::occluded`]'s walk alone, a diagnostic for `snell bench --walk-only`: in a world
-    /// that is one untransformed mesh in leaves (as [`World::one_tree`] finds it), its tree
+    /// that is one untransformed mesh in leaves (as `World::one_tree` finds it), its tree
     /// walked for the ray as an any-hit query walks it, but every leaf answering "not blocked"
     /// at once, without its triangle tests. So the walk visits every node whose box the ray
     /// enters, and reaches every leaf, as a ray that nothing blocks does; its time is the
