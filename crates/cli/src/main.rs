@@ -334,6 +334,8 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     }
     .with_context(|| format!("writing {}", args.output.display()))?;
     print_stats(&stats);
+    // The pool this command runs in (`in_pool`).
+    let threads = rayon::current_num_threads();
     println!(
         "{}: {}x{} at {} spp with {} ({} triangles): load {:.2} s, build {:.3} s, render {:.3} s, {:.2} Mrays/s, {} {}",
         args.output.display(),
@@ -346,8 +348,8 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         build_s,
         render_s,
         stats.total_rays() as f64 / render_s.max(1e-9) / 1e6,
-        rayon::current_num_threads(),
-        if rayon::current_num_threads() == 1 { "thread" } else { "threads" }
+        threads,
+        if threads == 1 { "thread" } else { "threads" }
     );
     Ok(())
 }
