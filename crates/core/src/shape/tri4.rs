@@ -101,6 +101,12 @@ impl Tri4 {
         self.id[0] == Tri4::NONE
     }
 
+    /// Lane `lane`'s `hit` as a [`BlockHit`]: its triangle and where its corners are.
+    #[inline(always)]
+    fn hit_at(&self, lane: usize, hit: TriHit) -> BlockHit<'_> {
+        BlockHit { tri: self.id[lane], hit, corners: Corners { block: self, lane } }
+    }
+
     #[inline(always)]
     fn corners(&self, lane: usize) -> [Vec3; 3] {
         self.v.map(|p| Vec3::new(p[0][lane], p[1][lane], p[2][lane]))
@@ -155,7 +161,7 @@ impl Tri4 {
                 None => {
                     if let Some((lane, hit)) = block.closest_scalar(r, t_max) {
                         t_max = hit.t;
-                        rec = Some(BlockHit { tri: block.id[lane], hit, corners: Corners { block, lane } });
+                        rec = Some(block.hit_at(lane, hit));
                     }
                     continue;
                 }
@@ -164,7 +170,7 @@ impl Tri4 {
             let found = block.closest_scalar(r, t_max);
             if let Some((lane, hit)) = found {
                 t_max = hit.t;
-                rec = Some(BlockHit { tri: block.id[lane], hit, corners: Corners { block, lane } });
+                rec = Some(block.hit_at(lane, hit));
             }
         }
         rec
