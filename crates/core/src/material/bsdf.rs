@@ -16,12 +16,14 @@
 //! - Refraction scales radiance by `1/η²` (η: the index the light enters over the one it
 //!   leaves, seen along `wo`), as the transport of radiance across an interface requires.
 
+use std::collections::HashMap;
 use std::f32::consts::FRAC_1_PI;
+use std::sync::{Mutex, OnceLock};
 
 use glam::{Vec2, Vec3};
 
 use super::fresnel;
-use super::microfacet::Microfacet;
+use super::microfacet::{Distribution, Microfacet};
 use crate::sampling::concentric_disk;
 use crate::Rgb;
 
@@ -103,6 +105,26 @@ impl CoatTable {
             ),
         };
         CoatTable { transmittance, internal_reflectance: internal_reflectance.min(1.0 - 1e-4), nonlinear: false }
+    }
+
+    /// [`CoatTable::new`], each coat made once per process: the table depends only on `eta` and
+    /// `mf`, and a scene's plastics often share their coat (an OBJ's MTL materials their `Ns`),
+    /// so later plastics of the same coat copy the table instead of integrating it again.
+    pub fn shared(eta: f32, mf: Option<Microfacet>) -> CoatTable {
+        type Coat = (u32, Option<(Distribution, u32)>);
+        static MADE: OnceLock<Mutex<HashMap<Coat, CoatTable>>> = OnceLock::new();
+        let made = MADE.get_or_init(Default::default);
+        // (A thread that panicked holding the lock left whole tables behind: each is inserted
+        // in one call.)
+        let lock = || made.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        let coat = (eta.to_bits(), mf.map(|m| (m.kind, m.alpha.to_bits())));
+        if let Some(table) = lock().get(&coat) {
+            return *table;
+        }
+        // Made without the lock held, so that other coats are made meanwhile.
+        let table = CoatTable::new(eta, mf);
+        lock().insert(coat, table);
+        table
     }
 
     /// Transmittance into the coat from direction cosine `cos` (outside).
@@ -766,6 +788,25 @@ mod tests {
                     );
                     assert_eq!(table.internal_reflectance.to_bits(), internal.to_bits(), "{kind:?} {eta} {alpha}");
                 }
+            }
+        }
+    }
+
+    /// A shared coat is the table `CoatTable::new` makes for its own parameters, bit for bit,
+    /// however the coats before it differed (by index, roughness, distribution or smoothness):
+    /// fails if the cache's key leaves one of them out.
+    #[test]
+    fn shared_coats_are_their_own_parameters_tables() {
+        let coats = [
+            (1.5f32, None),
+            (1.5, Some(Microfacet::new(Distribution::Ggx, 0.2))),
+            (1.5, Some(Microfacet::new(Distribution::Ggx, 0.4))),
+            (1.5, Some(Microfacet::new(Distribution::Beckmann, 0.4))),
+            (1.7, Some(Microfacet::new(Distribution::Beckmann, 0.4))),
+        ];
+        for _ in 0..2 {
+            for &(eta, mf) in &coats {
+                assert_eq!(CoatTable::shared(eta, mf), CoatTable::new(eta, mf), "{eta} {mf:?}");
             }
         }
     }

@@ -10,7 +10,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3};
 
 /// Which normal distribution.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Distribution {
     Ggx,
     Beckmann,

@@ -156,7 +156,7 @@ fn microfacet(roughness: f32, distribution: Distribution) -> Option<Microfacet> 
 impl Material {
     /// A plastic, with its coat tabulated (see [`CoatTable`]).
     pub fn plastic(diffuse: Texture, specular: Rgb, ior: f32, roughness: f32, distribution: Distribution) -> Material {
-        let coat = Box::new(CoatTable::new(ior, microfacet(roughness, distribution)));
+        let coat = Box::new(CoatTable::shared(ior, microfacet(roughness, distribution)));
         Material::Plastic { diffuse, specular, ior, roughness, distribution, coat }
     }
 
