@@ -91,9 +91,12 @@ impl CoatTable {
                 // Index i < N: the transmittance at cosine i; N + i: the inside term at it.
                 let terms: Vec<f32> = (0..2 * Self::N)
                     .into_par_iter()
-                    .map(|k| match k < Self::N {
-                        true => interface_scattering(eta, mf, cosine(k)).1,
-                        false => inside(cosine(k - Self::N)),
+                    .map(|k| {
+                        if k < Self::N {
+                            interface_scattering(eta, mf, cosine(k)).1
+                        } else {
+                            inside(cosine(k - Self::N))
+                        }
                     })
                     .collect();
                 let transmittance = std::array::from_fn(|i| terms[i]);
