@@ -210,17 +210,7 @@ pub(crate) fn load(scene: Option<&Path>, defines: &[(String, String)]) -> Result
     if !defines.is_empty() && ext.as_deref() != Some("xml") {
         bail!("-D applies to Mitsuba scenes (.xml) only");
     }
-    Ok(match ext.as_deref() {
-        Some("toml") => snell_io::scene::load(path)?,
-        Some("xml") => snell_io::mitsuba::load(path, defines)?,
-        Some("pbrt") => snell_io::pbrt::load(path)?,
-        Some("gltf") | Some("glb") => snell_io::gltf::load(path)?,
-        Some("obj") | Some("ply") => snell_io::scene::from_mesh(path)?,
-        _ => bail!(
-            "{}: unsupported scene format (expected .toml, .xml, .pbrt, .gltf, .glb, .obj or .ply)",
-            path.display()
-        ),
-    })
+    Ok(snell_io::load_scene(path, defines)?)
 }
 
 fn cmd_render(args: RenderArgs) -> Result<()> {
@@ -239,7 +229,8 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         height: args.height.unwrap_or(s.height),
         spp: args.spp.unwrap_or(s.spp),
         seed: args.seed.unwrap_or(s.seed),
-        threads: args.threads.unwrap_or(0) as usize,
+        // The command's own pool (`in_pool`), which the render then works in.
+        threads: rayon::current_num_threads(),
         filter: s.filter.clone(),
         reconstruction: s.reconstruction,
         sampler: args.sampler.unwrap_or(s.sampler),
@@ -334,8 +325,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     }
     .with_context(|| format!("writing {}", args.output.display()))?;
     print_stats(&stats);
-    // The pool this command runs in (`in_pool`).
-    let threads = rayon::current_num_threads();
+    let threads = settings.threads;
     println!(
         "{}: {}x{} at {} spp with {} ({} triangles): load {:.2} s, build {:.3} s, render {:.3} s, {:.2} Mrays/s, {} {}",
         args.output.display(),

@@ -246,9 +246,16 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
             })
             .collect::<Vec<_>>()
     };
-    let results = match rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build() {
-        Ok(pool) => pool.install(work),
-        Err(_) => work(),
+    // Called from a pool of the workers asked for (the CLI runs each command in one), the
+    // render works in it; otherwise in a pool of its own.
+    let in_pool = rayon::current_thread_index().is_some() && rayon::current_num_threads() == settings.threads;
+    let results = if in_pool {
+        work()
+    } else {
+        match rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build() {
+            Ok(pool) => pool.install(work),
+            Err(_) => work(),
+        }
     };
     // Tiles are merged in a fixed order, so the sums (and the image) do not depend on threads.
     let mut sums = vec![Accum::default(); (w * h) as usize];

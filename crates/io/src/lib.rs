@@ -27,6 +27,21 @@ use std::path::Path;
 
 use snell_core::shape::Mesh;
 
+/// Loads a scene file by its extension: Snell's TOML (`.toml`), Mitsuba 3 XML (`.xml`, with
+/// `defines` for its `$name` defaults), pbrt-v4 (`.pbrt`), glTF (`.gltf`, `.glb`), or a bare
+/// mesh (`.obj`, `.ply`) in [`scene::from_mesh`]'s scene around it.
+pub fn load_scene(path: &Path, defines: &[(String, String)]) -> Result<scene::LoadedScene, Error> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("toml") => scene::load(path),
+        Some("xml") => mitsuba::load(path, defines),
+        Some("pbrt") => pbrt::load(path),
+        Some("gltf") | Some("glb") => gltf::load(path),
+        Some("obj") | Some("ply") => scene::from_mesh(path),
+        _ => Err(Error::new(path, "unsupported scene format (expected .toml, .xml, .pbrt, .gltf, .glb, .obj or .ply)")),
+    }
+}
+
 /// Reads a mesh by extension (`.obj` or `.ply`), validated and without degenerate-index faces.
 pub fn read_mesh(path: &Path) -> Result<Mesh, Error> {
     let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
