@@ -39,10 +39,7 @@ pub fn heat_map<A: Accel>(world: &World<A>, s: &RenderSettings) -> HeatMap {
             })
             .collect::<Vec<_>>()
     };
-    let v = match rayon::ThreadPoolBuilder::new().num_threads(s.threads).build() {
-        Ok(pool) => pool.install(run),
-        Err(_) => run(),
-    };
+    let v = crate::render::on_threads(s.threads, run);
     HeatMap {
         width: s.width,
         height: s.height,

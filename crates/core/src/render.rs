@@ -246,17 +246,7 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
             })
             .collect::<Vec<_>>()
     };
-    // Called from a pool of the workers asked for (the CLI runs each command in one), the
-    // render works in it; otherwise in a pool of its own.
-    let in_pool = rayon::current_thread_index().is_some() && rayon::current_num_threads() == settings.threads;
-    let results = if in_pool {
-        work()
-    } else {
-        match rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build() {
-            Ok(pool) => pool.install(work),
-            Err(_) => work(),
-        }
-    };
+    let results = on_threads(settings.threads, work);
     // Tiles are merged in a fixed order, so the sums (and the image) do not depend on threads.
     let mut sums = vec![Accum::default(); (w * h) as usize];
     let mut stats = RayStats::default();
@@ -281,6 +271,19 @@ pub fn render_with_aovs<A: Accel, I: Integrator>(
         depth: sums.iter().map(|a| if a.w > 0.0 { a.depth / a.w } else { 0.0 }).collect(),
     });
     (image, aovs, stats)
+}
+
+/// Runs `f` on `threads` workers (0: one per core). Called from a pool of that many (the CLI
+/// runs each command in one), `f` works in it; otherwise in a pool of its own (or, where no
+/// pool can be made, in the caller's).
+pub(crate) fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    if rayon::current_thread_index().is_some() && rayon::current_num_threads() == threads {
+        return f();
+    }
+    match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+        Ok(pool) => pool.install(f),
+        Err(_) => f(),
+    }
 }
 
 /// Samples of a pixel whose camera rays are traced together: packets of eight, `CHUNK / 8`
