@@ -278,11 +278,86 @@ impl Wide {
 const LEAF: u32 = 1 << 31;
 const EMPTY: u32 = u32::MAX;
 
-/// Interior references count in 32-byte units: node `i` is `i · NODE_UNITS`, its byte offset
-/// over 32. The traversal finds a node by one shift and add, instead of a multiply by 224 on
-/// the path from one node to the next.
-const NODE_UNITS: usize = std::mem::size_of::<Wide>() / 32;
-const _: () = assert!(std::mem::size_of::<Wide>() == NODE_UNITS * 32 && std::mem::align_of::<Wide>() == 32);
+/// Interior references count in 8-byte units: node `i` is `i · NODE_UNITS`, its byte offset
+/// over 8. The traversal reads a row of a node's bounds at `row of node 0 + reference · 8`
+/// ([`Rows`]), a single x86 address (base plus index times 8): no instruction stands between a
+/// child's reference, just loaded, and the loads of its bounds. (In 32-byte units a shift and an
+/// add stood there, and before that a multiply by 224.)
+const UNIT_BYTES: usize = 8;
+const NODE_UNITS: usize = std::mem::size_of::<Wide>() / UNIT_BYTES;
+const _: () = assert!(std::mem::size_of::<Wide>() == NODE_UNITS * UNIT_BYTES && std::mem::align_of::<Wide>() == 32);
+
+/// Where the AVX slab test reads one node's six rows of bounds: the rows of a ray's near planes
+/// (x, y, z) and then of its far planes ([`RayPre::near`], [`RayPre::far`]) in node 0 of an array
+/// of nodes, and the node's reference, so that row `k` is at `base[k] + unit · UNIT_BYTES`.
+///
+/// A walk makes `base` once per ray ([`Rows::tree`]) and reads each row with one load whose
+/// address is that sum ([`Rows::load`], written in `asm`). Written as pointer arithmetic, the
+/// compiler computed the node's address (or `unit · 8`) into a register first and added each
+/// row's offset in the load, even from six opaque row pointers: one more instruction on the
+/// chain from a child's reference to its bounds, which is most of what a node visit waits on. Single rays 1–5 % faster on an AMD Zen 3 (the
+/// bench's meshes, paired; MEASUREMENTS.md, sixty-ninth session), renders unchanged.
+#[derive(Clone, Copy)]
+struct Rows {
+    base: [*const u8; 6],
+    unit: usize,
+}
+
+impl Rows {
+    /// The six rows' offsets into a node for `r`, near planes first.
+    #[inline(always)]
+    fn offsets(r: &RayPre) -> [usize; 6] {
+        [r.near[0], r.near[1], r.near[2], r.far[0], r.far[1], r.far[2]]
+    }
+
+    /// The rows of node `n` itself.
+    #[inline(always)]
+    fn of(n: &Wide, r: &RayPre) -> Rows {
+        let b = (n as *const Wide).cast::<u8>();
+        Rows { base: Rows::offsets(r).map(|o| b.wrapping_add(o)), unit: 0 }
+    }
+
+    /// The rows of node 0 of `nodes` for the ray `r`, for [`Rows::at`].
+    #[inline(always)]
+    fn tree(nodes: &[Wide], r: &RayPre) -> [*const u8; 6] {
+        let b = nodes.as_ptr().cast::<u8>();
+        Rows::offsets(r).map(|o| b.wrapping_add(o))
+    }
+
+    /// The rows of the node with interior reference `r` (of the array `base` was made for).
+    ///
+    /// # Safety
+    /// `r` must be an interior reference of that array (the rows then lie in its node).
+    #[inline(always)]
+    unsafe fn at(base: &[*const u8; 6], r: u32) -> Rows {
+        Rows { base: *base, unit: r as usize }
+    }
+
+    /// Row `k` (0–2 the near planes' x, y, z, 3–5 the far planes'): one unaligned 32-byte
+    /// load addressing `base[k] + unit · 8`.
+    ///
+    /// # Safety
+    /// The CPU must support AVX. (The row lies in a node: a `Rows` is made only by
+    /// [`Rows::of`], or by [`Rows::at`] for a reference its caller vouches for.)
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn load(self, k: usize) -> std::arch::x86_64::__m256 {
+        const { assert!(UNIT_BYTES == 8, "the load's index scale") };
+        let v: std::arch::x86_64::__m256;
+        // SAFETY: 32 bytes of a node's bounds (see above), read without side effects.
+        unsafe {
+            std::arch::asm!(
+                "vmovups {v}, ymmword ptr [{b} + {i}*8]",
+                v = out(ymm_reg) v,
+                b = in(reg) self.base[k],
+                i = in(reg) self.unit,
+                options(pure, readonly, nostack, preserves_flags)
+            )
+        };
+        v
+    }
+}
 
 /// The reference of interior node `index`.
 fn node_ref(index: usize) -> u32 {
@@ -1152,12 +1227,12 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, finite: bool, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+fn slab_avx<const FUSED: bool>(at: Rows, r: &RayPre, finite: bool, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
     debug_assert_eq!(finite, r.finite);
     if finite {
-        slab_avx_with::<true, FUSED>(n, r, t_max, out)
+        slab_avx_with::<true, FUSED>(at, r, t_max, out)
     } else {
-        slab_avx_float(n, *r, t_max, out)
+        slab_avx_float(at, *r, t_max, out)
     }
 }
 
@@ -1168,8 +1243,8 @@ fn slab_avx<const FUSED: bool>(n: &Wide, r: &RayPre, finite: bool, t_max: f32, o
 #[target_feature(enable = "avx2,fma")]
 #[cold]
 #[inline(never)]
-fn slab_avx_float(n: &Wide, r: RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
-    slab_avx_with::<false, false>(n, &r, t_max, out)
+fn slab_avx_float(at: Rows, r: RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+    slab_avx_with::<false, false>(at, &r, t_max, out)
 }
 
 /// [`slab_avx`]'s arithmetic: maxima and minima on the floats' bits where `INT`, float ones
@@ -1178,9 +1253,9 @@ fn slab_avx_float(n: &Wide, r: RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u3
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn slab_avx_with<const INT: bool, const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+fn slab_avx_with<const INT: bool, const FUSED: bool>(at: Rows, r: &RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
     use std::arch::x86_64::*;
-    let (tn, tf) = slab_avx_dists::<INT, FUSED>(n, r, t_max);
+    let (tn, tf) = slab_avx_dists::<INT, FUSED>(at, r, t_max);
     let mask = if INT {
         _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(tn), _mm256_castps_si256(tf))))
             as u32
@@ -1199,21 +1274,18 @@ fn slab_avx_with<const INT: bool, const FUSED: bool>(n: &Wide, r: &RayPre, t_max
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 fn slab_avx_dists<const INT: bool, const FUSED: bool>(
-    n: &Wide,
+    at: Rows,
     r: &RayPre,
     t_max: f32,
 ) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
     use std::arch::x86_64::*;
     const { assert!(WIDTH == 8, "one AVX register holds eight children") };
-    let b = &n.bounds;
     let mut tn = _mm256_setzero_ps();
     let mut tf = _mm256_set1_ps(t_max * EXIT_ROUNDING);
     for a in 0..3 {
         let o = _mm256_set1_ps(r.o[a]);
-        // SAFETY: unaligned loads of 8-float rows of `n`.
-        let (lo, hi) = unsafe {
-            (_mm256_loadu_ps(RayPre::row(b, r.near[a]).as_ptr()), _mm256_loadu_ps(RayPre::row(b, r.far[a]).as_ptr()))
-        };
+        // SAFETY: this function is compiled for AVX2 (`Rows` only names rows of a node).
+        let (lo, hi) = unsafe { (at.load(a), at.load(3 + a)) };
         let (t0, t1) = if INT && FUSED {
             (
                 _mm256_fmadd_ps(lo, _mm256_set1_ps(r.inv[a]), _mm256_set1_ps(r.c_near[a])),
@@ -1248,12 +1320,13 @@ fn imin8(a: std::arch::x86_64::__m256, b: std::arch::x86_64::__m256) -> std::arc
     _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))
 }
 
-/// The slab test of node `n`'s children: [`slab_avx`] where `AVX`, [`slab`] otherwise; the
-/// entry distances go to `t`, the hit mask is returned. `finite` is `r.finite`, as the walk
-/// read it (see [`slab_avx`]).
+/// The slab test of node `n`'s children: [`slab_avx`] where `AVX` (reading the node's rows
+/// through `at`), [`slab`] otherwise; the entry distances go to `t`, the hit mask is returned.
+/// `finite` is `r.finite`, as the walk read it (see [`slab_avx`]).
 #[inline(always)]
 fn node_slab<const AVX: bool, const FUSED: bool>(
     n: &Wide,
+    at: Rows,
     r: &RayPre,
     finite: bool,
     t_max: f32,
@@ -1262,8 +1335,10 @@ fn node_slab<const AVX: bool, const FUSED: bool>(
     #[cfg(target_arch = "x86_64")]
     if AVX {
         // SAFETY: `AVX` is true only in traversals that run after AVX2 and FMA were detected.
-        return unsafe { slab_avx::<FUSED>(n, r, finite, t_max, t) };
+        return unsafe { slab_avx::<FUSED>(at, r, finite, t_max, t) };
     }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = at;
     let mask;
     (*t, mask) = slab(n, r, t_max);
     mask
@@ -1274,10 +1349,12 @@ fn node_slab<const AVX: bool, const FUSED: bool>(
 /// two-child cases, by far the most common, take no loop. With `ANY` (the any-hit walk) the
 /// children are not ordered: the first hit is returned, the others pushed in slot order.
 /// `finite` as in [`node_slab`].
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn visit<const AVX: bool, const FUSED: bool, const ANY: bool>(
     nodes: &[Wide],
     n: &Wide,
+    at: Rows,
     r: &RayPre,
     finite: bool,
     t_max: f32,
@@ -1293,7 +1370,7 @@ fn visit<const AVX: bool, const FUSED: bool, const ANY: bool>(
         std::arch::x86_64::_mm_prefetch(n.child.as_ptr().cast::<i8>(), std::arch::x86_64::_MM_HINT_T0)
     };
     let mut t = [0.0f32; WIDTH];
-    let mask = node_slab::<AVX, FUSED>(n, r, finite, t_max, &mut t);
+    let mask = node_slab::<AVX, FUSED>(n, at, r, finite, t_max, &mut t);
     if mask == 0 {
         return None;
     }
@@ -1351,10 +1428,12 @@ fn visit<const AVX: bool, const FUSED: bool, const ANY: bool>(
 /// # Safety
 /// The CPU must support what [`has_avx512`] checks (only the AVX-512 walk calls it).
 #[cfg(target_arch = "x86_64")]
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 unsafe fn visit_avx512<const FUSED: bool>(
     nodes: &[Wide],
     n: &Wide,
+    at: Rows,
     r: &RayPre,
     finite: bool,
     t_max: f32,
@@ -1363,7 +1442,7 @@ unsafe fn visit_avx512<const FUSED: bool>(
 ) -> Option<u32> {
     use std::arch::x86_64::*;
     if !finite {
-        return visit::<true, FUSED, false>(nodes, n, r, finite, t_max, stack, sp);
+        return visit::<true, FUSED, false>(nodes, n, at, r, finite, t_max, stack, sp);
     }
     // SAFETY (of the intrinsics below): the caller's CPU has AVX2, FMA and AVX-512 F/VL; the
     // loads read `n`'s references, eight `u32`s.
@@ -1373,7 +1452,7 @@ unsafe fn visit_avx512<const FUSED: bool>(
         // asked for, as `visit` does.
         _mm_prefetch(n.child.as_ptr().cast::<i8>(), _MM_HINT_T0);
         let kids = _mm256_loadu_si256(n.child.as_ptr().cast());
-        let (tn, tf) = slab_avx_dists::<true, FUSED>(n, r, t_max);
+        let (tn, tf) = slab_avx_dists::<true, FUSED>(at, r, t_max);
         // Entry at or before exit, on the floats' bits as integers (as `slab_avx_with`).
         let k = _mm256_cmple_epi32_mask(_mm256_castps_si256(tn), _mm256_castps_si256(tf));
         let mask = k as u32;
@@ -1514,7 +1593,7 @@ fn prefetch_node(nodes: &[Wide], c: u32) {
     #[cfg(target_arch = "x86_64")]
     {
         let i = if (c as usize) < nodes.len() * NODE_UNITS { c as usize } else { 0 };
-        let p = nodes.as_ptr().cast::<i8>().wrapping_add(i << 5);
+        let p = nodes.as_ptr().cast::<i8>().wrapping_add(i * UNIT_BYTES);
         // SAFETY: prefetching is a hint with no memory effect, valid for any address.
         unsafe {
             use std::arch::x86_64::*;
@@ -1536,8 +1615,8 @@ impl Bvh {
         // index into `nodes` (the root, 0, where `nodes` is not empty), and nothing changes
         // them afterwards (`relabel_leaves` rewrites leaf references only); the traversals
         // call this only for references without the `LEAF` bit, which are never `EMPTY`
-        // (empty slots are never entered). So `r · 32` is the byte offset of a node of `nodes`.
-        unsafe { &*self.nodes.as_ptr().cast::<u8>().add((r as usize) << 5).cast::<Wide>() }
+        // (empty slots are never entered). So `r · UNIT_BYTES` is the byte offset of a node of `nodes`.
+        unsafe { &*self.nodes.as_ptr().cast::<u8>().add((r as usize) * UNIT_BYTES).cast::<Wide>() }
     }
 
     fn leaf(&self, leaf: u32) -> &[u32] {
@@ -1587,6 +1666,7 @@ impl Bvh {
         let mut hit = false;
         let r = ray_pre::<FUSED>(ray, inv);
         let finite = r.finite;
+        let rows = Rows::tree(&self.nodes, &r);
         // Uninitialised: zeroing it (3.5 KiB) per ray showed up in profiles. Only entries below `sp`
         // are read, and each was written first.
         let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); (WIDTH - 1) * MAX_STACK];
@@ -1609,15 +1689,17 @@ impl Bvh {
                 }
                 counter.node();
                 let n = self.node(cur);
+                // SAFETY: `cur` is an interior reference (not a leaf's) of `self.nodes`.
+                let at = unsafe { Rows::at(&rows, cur) };
                 #[cfg(target_arch = "x86_64")]
                 let next = if AVX512 {
                     // SAFETY: `AVX512` is true only in the walk compiled with AVX-512.
-                    unsafe { visit_avx512::<FUSED>(&self.nodes, n, &r, finite, *t_max, &mut stack, &mut sp) }
+                    unsafe { visit_avx512::<FUSED>(&self.nodes, n, at, &r, finite, *t_max, &mut stack, &mut sp) }
                 } else {
-                    visit::<AVX, FUSED, false>(&self.nodes, n, &r, finite, *t_max, &mut stack, &mut sp)
+                    visit::<AVX, FUSED, false>(&self.nodes, n, at, &r, finite, *t_max, &mut stack, &mut sp)
                 };
                 #[cfg(not(target_arch = "x86_64"))]
-                let next = visit::<AVX, FUSED, false>(&self.nodes, n, &r, finite, *t_max, &mut stack, &mut sp);
+                let next = visit::<AVX, FUSED, false>(&self.nodes, n, at, &r, finite, *t_max, &mut stack, &mut sp);
                 match next {
                     Some(next) => cur = next,
                     None => break,
@@ -1644,7 +1726,7 @@ impl Bvh {
         let n = &self.nodes[0];
         counter.node();
         let mut t = [0.0f32; WIDTH];
-        let mut mask = node_slab::<AVX, FUSED>(n, r, r.finite, *t_max, &mut t);
+        let mut mask = node_slab::<AVX, FUSED>(n, Rows::of(n, r), r, r.finite, *t_max, &mut t);
         let mut hit = false;
         while mask != 0 {
             let j = nearest_lane(&t, mask);
@@ -1673,7 +1755,7 @@ impl Bvh {
     ) -> bool {
         let n = &self.nodes[0];
         counter.node();
-        let mut mask = node_slab::<AVX, FUSED>(n, r, r.finite, t_max, &mut [0.0; WIDTH]);
+        let mut mask = node_slab::<AVX, FUSED>(n, Rows::of(n, r), r, r.finite, t_max, &mut [0.0; WIDTH]);
         // The lowest slot first, then the others from the highest down: the walk's order
         // (the first child hit taken, the others pushed in slot order and popped).
         let mut j = mask.trailing_zeros() as usize;
@@ -1713,6 +1795,7 @@ impl Bvh {
         };
         let r = ray_pre::<FUSED>(ray, inv);
         let finite = r.finite;
+        let rows = Rows::tree(&self.nodes, &r);
         let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); (WIDTH - 1) * MAX_STACK];
         stack[0].write((root, 0.0));
         let mut sp = 1usize;
@@ -1728,7 +1811,10 @@ impl Bvh {
                     break;
                 }
                 counter.node();
-                match visit::<AVX, FUSED, true>(&self.nodes, self.node(cur), &r, finite, t_max, &mut stack, &mut sp) {
+                // SAFETY: `cur` is an interior reference (not a leaf's) of `self.nodes`.
+                let at = unsafe { Rows::at(&rows, cur) };
+                match visit::<AVX, FUSED, true>(&self.nodes, self.node(cur), at, &r, finite, t_max, &mut stack, &mut sp)
+                {
                     Some(next) => cur = next,
                     None => break,
                 }
@@ -2757,7 +2843,7 @@ mod tests {
     unsafe fn slab_avx_pair<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
         let mut t = [0.0f32; WIDTH];
         // SAFETY: the caller checked for AVX2 and FMA.
-        let mask = unsafe { slab_avx::<FUSED>(n, r, r.finite, t_max, &mut t) };
+        let mask = unsafe { slab_avx::<FUSED>(Rows::of(n, r), r, r.finite, t_max, &mut t) };
         (t, mask)
     }
 
