@@ -1227,24 +1227,26 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn slab_avx<const FUSED: bool>(at: Rows, r: &RayPre, finite: bool, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+fn slab_avx<const FUSED: bool>(n: &Wide, at: Rows, r: &RayPre, finite: bool, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
     debug_assert_eq!(finite, r.finite);
     if finite {
         slab_avx_with::<true, FUSED>(at, r, t_max, out)
     } else {
-        slab_avx_float(at, *r, t_max, out)
+        slab_avx_float(n, *r, t_max, out)
     }
 }
 
 /// [`slab_avx`] for rays with a zero direction component (kept out of the hot path). It takes
 /// the ray's constants by value: by reference, every query laid them out in memory for this
-/// call, which almost never happens (the Cornell box 1.4 % more instructions).
+/// call, which almost never happens (the Cornell box 1.4 % more instructions). For the same
+/// reason it takes the node, not its [`Rows`]: those 56 bytes, passed by value, were stored to
+/// memory at every node visit of some walks.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[cold]
 #[inline(never)]
-fn slab_avx_float(at: Rows, r: RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
-    slab_avx_with::<false, false>(at, &r, t_max, out)
+fn slab_avx_float(n: &Wide, r: RayPre, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+    slab_avx_with::<false, false>(Rows::of(n, &r), &r, t_max, out)
 }
 
 /// [`slab_avx`]'s arithmetic: maxima and minima on the floats' bits where `INT`, float ones
@@ -1335,7 +1337,7 @@ fn node_slab<const AVX: bool, const FUSED: bool>(
     #[cfg(target_arch = "x86_64")]
     if AVX {
         // SAFETY: `AVX` is true only in traversals that run after AVX2 and FMA were detected.
-        return unsafe { slab_avx::<FUSED>(at, r, finite, t_max, t) };
+        return unsafe { slab_avx::<FUSED>(n, at, r, finite, t_max, t) };
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = at;
@@ -2843,7 +2845,7 @@ mod tests {
     unsafe fn slab_avx_pair<const FUSED: bool>(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
         let mut t = [0.0f32; WIDTH];
         // SAFETY: the caller checked for AVX2 and FMA.
-        let mask = unsafe { slab_avx::<FUSED>(Rows::of(n, r), r, r.finite, t_max, &mut t) };
+        let mask = unsafe { slab_avx::<FUSED>(n, Rows::of(n, r), r, r.finite, t_max, &mut t) };
         (t, mask)
     }
 
