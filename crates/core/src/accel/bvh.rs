@@ -1227,7 +1227,14 @@ fn slab(n: &Wide, r: &RayPre, t_max: f32) -> ([f32; WIDTH], u32) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn slab_avx<const FUSED: bool>(n: &Wide, at: Rows, r: &RayPre, finite: bool, t_max: f32, out: &mut [f32; WIDTH]) -> u32 {
+fn slab_avx<const FUSED: bool>(
+    n: &Wide,
+    at: Rows,
+    r: &RayPre,
+    finite: bool,
+    t_max: f32,
+    out: &mut [f32; WIDTH],
+) -> u32 {
     debug_assert_eq!(finite, r.finite);
     if finite {
         slab_avx_with::<true, FUSED>(at, r, t_max, out)
