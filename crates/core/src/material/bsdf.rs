@@ -85,25 +85,20 @@ impl CoatTable {
     pub fn new(eta: f32, mf: Option<Microfacet>) -> CoatTable {
         use rayon::prelude::*;
         let cosine = |i: usize| (i as f32 / (Self::N - 1) as f32).max(1e-6);
+        let transmittance_at = |i: usize| interface_scattering(eta, mf, cosine(i)).1;
         let inside = |mu: f32| 2.0 * mu * interface_scattering(1.0 / eta, mf, mu).0;
         let (transmittance, internal_reflectance) = match mf {
             Some(_) => {
                 // Index i < N: the transmittance at cosine i; N + i: the inside term at it.
                 let terms: Vec<f32> = (0..2 * Self::N)
                     .into_par_iter()
-                    .map(|k| {
-                        if k < Self::N {
-                            interface_scattering(eta, mf, cosine(k)).1
-                        } else {
-                            inside(cosine(k - Self::N))
-                        }
-                    })
+                    .map(|k| if k < Self::N { transmittance_at(k) } else { inside(cosine(k - Self::N)) })
                     .collect();
                 let transmittance = std::array::from_fn(|i| terms[i]);
                 (transmittance, terms[Self::N..].iter().sum::<f32>() / Self::N as f32)
             }
             None => (
-                std::array::from_fn(|i| interface_scattering(eta, mf, cosine(i)).1),
+                std::array::from_fn(transmittance_at),
                 (0..1024).map(|i| inside((i as f32 + 0.5) / 1024.0)).sum::<f32>() / 1024.0,
             ),
         };
